@@ -1,0 +1,90 @@
+//! Accuracy against ground truth: the absolute trajectory error (ATE).
+//!
+//! ATE is the position RMSE after the rigid 2-D motion `(R, t)` that best
+//! aligns the estimate to the truth: with centred points `e'_k`, `g'_k`,
+//! `R = arg Σ g'_k ē'_k` and `t = ḡ − R ē` (Kabsch in the plane).
+
+use crate::geometry::Pose2;
+use crate::graph::{KeyframeId, PoseGraph};
+use faer::c64;
+use std::collections::HashMap;
+
+/// The ATE of a set of poses and how many keyframes it covered.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Ate {
+    /// Position RMSE after alignment (m).
+    pub rmse: f64,
+    /// Keyframes present in both the estimate and the truth.
+    pub matched: usize,
+}
+
+/// The rigid motion `x ↦ R x + t` best aligning `from` onto `to`.
+pub fn align_rigid(from: &[c64], to: &[c64]) -> (c64, c64) {
+    let n = from.len().max(1) as f64;
+    let cf: c64 = from.iter().sum::<c64>() / n;
+    let ct: c64 = to.iter().sum::<c64>() / n;
+    let s: c64 = from.iter().zip(to).map(|(f, t)| (t - ct) * (f - cf).conj()).sum();
+    let r = if s.norm() > 0.0 {
+        s / s.norm()
+    } else {
+        c64::new(1.0, 0.0)
+    };
+    (r, ct - r * cf)
+}
+
+/// `moving` carried by the rigid motion that best aligns it onto `fixed`
+/// (matched by index): how to draw ground truth over an estimate.
+pub fn aligned_onto(moving: &[Pose2], fixed: &[Pose2]) -> Vec<Pose2> {
+    let m: Vec<c64> = moving.iter().map(|p| p.position()).collect();
+    let f: Vec<c64> = fixed.iter().take(m.len()).map(|p| p.position()).collect();
+    let (r, t) = align_rigid(&m[..f.len()], &f);
+    moving
+        .iter()
+        .map(|p| Pose2::from_complex(r * p.position() + t, p.theta + r.arg()))
+        .collect()
+}
+
+/// ATE of `poses` (indexed like `graph`) against truth keyed by keyframe id.
+/// `None` when fewer than two keyframes match.
+pub fn ate(graph: &PoseGraph, poses: &[Pose2], truth: &HashMap<KeyframeId, Pose2>) -> Option<Ate> {
+    let (est, gt): (Vec<c64>, Vec<c64>) = graph
+        .keyframes()
+        .iter()
+        .zip(poses)
+        .filter_map(|(k, p)| truth.get(&k.id).map(|g| (p.position(), g.position())))
+        .unzip();
+    if est.len() < 2 {
+        return None;
+    }
+    let (r, t) = align_rigid(&est, &gt);
+    let sq: f64 = est.iter().zip(&gt).map(|(e, g)| (r * e + t - g).norm_sqr()).sum();
+    Some(Ate {
+        rmse: (sq / est.len() as f64).sqrt(),
+        matched: est.len(),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rigid_motion_has_zero_ate_and_noise_does_not() {
+        let mut g = PoseGraph::default();
+        let truth: HashMap<u64, Pose2> = (0..4)
+            .map(|i| (i, Pose2::new(i as f64, (i * i) as f64, 0.0)))
+            .collect();
+        for i in 0..4 {
+            g.add_keyframe(i, None).unwrap();
+        }
+        let m = Pose2::new(3.0, -1.0, 0.8);
+        let moved: Vec<Pose2> = (0..4).map(|i| m.compose(&truth[&i])).collect();
+        let a = ate(&g, &moved, &truth).unwrap();
+        assert!(a.rmse < 1e-12 && a.matched == 4);
+
+        let mut noisy = moved.clone();
+        noisy[2].x += 0.4;
+        let a = ate(&g, &noisy, &truth).unwrap();
+        assert!(a.rmse > 0.1 && a.rmse < 0.4, "{}", a.rmse);
+    }
+}

@@ -1,0 +1,70 @@
+//! [`Edge`]: one relative-pose measurement between two keyframes.
+
+use super::Information;
+use crate::geometry::Pose2;
+
+/// What produced an edge. The outlier filter never switches odometry.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum EdgeKind {
+    /// Consecutive keyframes, from the frontend's odometry.
+    #[default]
+    Odometry,
+    /// A place-recognition match between distant keyframes.
+    LoopClosure,
+    /// Anything else (a prior, a manual constraint).
+    Other,
+}
+
+impl EdgeKind {
+    /// The usual reading of a dataset file: keyframes with consecutive ids are
+    /// odometry, every other pair a loop closure.
+    pub fn from_ids(i: u64, j: u64) -> Self {
+        if i.abs_diff(j) == 1 {
+            EdgeKind::Odometry
+        } else {
+            EdgeKind::LoopClosure
+        }
+    }
+}
+
+/// A measurement `T_ij` of keyframe `j` seen from keyframe `i`, with its
+/// information matrix Ω_ij. `from` and `to` are indices into a
+/// [`PoseGraph`](super::PoseGraph).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Edge {
+    /// Index of keyframe `i`.
+    pub from: usize,
+    /// Index of keyframe `j`.
+    pub to: usize,
+    /// `T_ij`, the pose of `j` in the frame of `i`.
+    pub measurement: Pose2,
+    /// Ω_ij over the error `t2v(T_ij⁻¹ T_i⁻¹ T_j)`.
+    pub information: Information,
+    /// What produced it.
+    pub kind: EdgeKind,
+}
+
+impl Edge {
+    /// The edge written the other way, `(j, i, T_ij⁻¹)`, information kept.
+    pub fn reversed(&self) -> Edge {
+        Edge {
+            from: self.to,
+            to: self.from,
+            measurement: self.measurement.inverse(),
+            information: self.information,
+            kind: self.kind,
+        }
+    }
+
+    /// The newer keyframe index, `max(i, j)`: when the edge becomes available
+    /// to an online solver.
+    pub fn newer(&self) -> usize {
+        self.from.max(self.to)
+    }
+
+    /// The older keyframe index, `min(i, j)`.
+    pub fn older(&self) -> usize {
+        self.from.min(self.to)
+    }
+}

@@ -1,0 +1,93 @@
+//! Pose tables (`id x y θ` or `x y θ` per line) and ground truth.
+
+use super::{numbers, read_graph, ReadError, ReadErrorKind};
+use crate::geometry::Pose2;
+use crate::graph::KeyframeId;
+use std::collections::HashMap;
+use std::path::Path;
+
+/// Reads a pose table: `id x y θ` per line, or `x y θ` where the id is the
+/// line's position among the data lines. `#` starts a comment.
+pub fn read_pose_table(path: &Path) -> Result<HashMap<KeyframeId, Pose2>, ReadError> {
+    let text = std::fs::read_to_string(path).map_err(|e| ReadError::io(path, e))?;
+    parse_pose_table(path, &text)
+}
+
+pub(crate) fn parse_pose_table(path: &Path, text: &str) -> Result<HashMap<KeyframeId, Pose2>, ReadError> {
+    let mut poses = HashMap::new();
+    let mut row: KeyframeId = 0;
+    for (n, line) in text.lines().enumerate() {
+        let content = line.split('#').next().unwrap_or("").trim();
+        if content.is_empty() {
+            continue;
+        }
+        let tokens: Vec<&str> = content
+            .split(|c: char| c.is_whitespace() || c == ',')
+            .filter(|t| !t.is_empty())
+            .collect();
+        let at = |kind| ReadError::at(path, n + 1, kind);
+        let (id, xyz) = match tokens.len() {
+            3 => (row, numbers::<3>(&tokens, "pose").map_err(at)?),
+            4 => {
+                let id = super::id(tokens[0], "pose").map_err(at)?;
+                (id, numbers::<3>(&tokens[1..], "pose").map_err(at)?)
+            }
+            k => {
+                return Err(at(ReadErrorKind::Malformed(format!(
+                    "pose line needs `id x y theta` or `x y theta`, found {k} fields"
+                ))))
+            }
+        };
+        if poses.insert(id, Pose2::new(xyz[0], xyz[1], xyz[2])).is_some() {
+            return Err(at(ReadErrorKind::Malformed(format!("duplicate pose id {id}"))));
+        }
+        row += 1;
+    }
+    Ok(poses)
+}
+
+/// Reads ground truth: a pose table, or a noise-free graph file whose edges
+/// are composed along a spanning tree from the first keyframe (odometry
+/// first).
+pub fn read_ground_truth(path: &Path) -> Result<HashMap<KeyframeId, Pose2>, ReadError> {
+    let text = std::fs::read_to_string(path).map_err(|e| ReadError::io(path, e))?;
+    let first_tag = text
+        .lines()
+        .map(|l| l.split('#').next().unwrap_or("").trim())
+        .find(|l| !l.is_empty())
+        .and_then(|l| l.split_whitespace().next())
+        .unwrap_or("");
+    if first_tag.chars().next().is_some_and(|c| c.is_ascii_alphabetic()) {
+        let graph = read_graph(path)?;
+        let poses = graph
+            .compose_spanning_tree()
+            .map_err(|e| ReadError::graph(path, e))?;
+        Ok(graph
+            .keyframes()
+            .iter()
+            .zip(poses)
+            .map(|(k, p)| (k.id, p))
+            .collect())
+    } else {
+        parse_pose_table(path, &text)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn reads_both_table_layouts() {
+        let p = Path::new("gt.txt");
+        let a = parse_pose_table(p, "0 0 0 0\n1 1.5 0 0.1\n").unwrap();
+        assert_eq!(a[&1], Pose2::new(1.5, 0.0, 0.1));
+        let b = parse_pose_table(p, "# x y t\n0 0 0\n2 0 0\n").unwrap();
+        assert_eq!(b[&1], Pose2::new(2.0, 0.0, 0.0));
+        let err = parse_pose_table(p, "0 0 0\n1 2\n").unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            "gt.txt:2: pose line needs `id x y theta` or `x y theta`, found 2 fields"
+        );
+    }
+}

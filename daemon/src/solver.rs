@@ -1,0 +1,175 @@
+//! The batch pipeline: a linear formulation, then optionally the polish.
+
+use crate::geometry::Pose2;
+use crate::graph::{chi2, GraphError, PoseGraph};
+use crate::linear::{two_stage, virtual_frame, Pivot};
+use crate::nonlinear::{polish, LevenbergMarquardtParams, LmReport};
+use crate::sparse::FactorError;
+use std::fmt;
+use std::str::FromStr;
+use std::time::Instant;
+
+/// How the initial (linear) solution is computed.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Formulation {
+    /// Axes, then positions (ALGORITHM.md §2). The default.
+    #[default]
+    TwoStage,
+    /// Paper A as printed: virtual frames, pivot on the neighbour.
+    VirtualFrame,
+    /// Paper A's triangles pivoted on `i_x`.
+    VirtualFramePivot,
+    /// Odometry composed along a spanning tree (the classic guess).
+    Odometry,
+}
+
+impl Formulation {
+    /// Every formulation, for tables and tests.
+    pub const ALL: [Formulation; 4] = [
+        Formulation::TwoStage,
+        Formulation::VirtualFrame,
+        Formulation::VirtualFramePivot,
+        Formulation::Odometry,
+    ];
+
+    /// The command-line name.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Formulation::TwoStage => "two-stage",
+            Formulation::VirtualFrame => "virtual-frame",
+            Formulation::VirtualFramePivot => "virtual-frame-pivot",
+            Formulation::Odometry => "odometry",
+        }
+    }
+}
+
+impl fmt::Display for Formulation {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl FromStr for Formulation {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        Formulation::ALL
+            .into_iter()
+            .find(|f| f.name() == s)
+            .ok_or_else(|| {
+                format!("unknown formulation `{s}` (two-stage, virtual-frame, virtual-frame-pivot, odometry)")
+            })
+    }
+}
+
+/// Why a batch solve failed.
+#[derive(Clone, Debug, PartialEq)]
+#[non_exhaustive]
+pub enum SolveError {
+    /// The graph cannot be solved (empty, disconnected).
+    Graph(GraphError),
+    /// A factorisation failed.
+    Factor(FactorError),
+}
+
+impl fmt::Display for SolveError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            SolveError::Graph(e) => e.fmt(f),
+            SolveError::Factor(e) => e.fmt(f),
+        }
+    }
+}
+
+impl std::error::Error for SolveError {}
+
+impl From<GraphError> for SolveError {
+    fn from(e: GraphError) -> Self {
+        SolveError::Graph(e)
+    }
+}
+
+impl From<FactorError> for SolveError {
+    fn from(e: FactorError) -> Self {
+        SolveError::Factor(e)
+    }
+}
+
+/// Options of [`solve_batch`].
+#[derive(Clone, Copy, Debug, Default)]
+pub struct BatchOptions {
+    /// The linear formulation.
+    pub formulation: Formulation,
+    /// Run the Levenberg–Marquardt polish after it.
+    pub polish: bool,
+    /// Polish parameters.
+    pub lm: LevenbergMarquardtParams,
+}
+
+/// What [`solve_batch`] found.
+#[derive(Clone, Debug)]
+pub struct BatchSolution {
+    /// Final poses, indexed like the graph.
+    pub poses: Vec<Pose2>,
+    /// χ² of the final poses.
+    pub chi2: f64,
+    /// χ² of the linear solution, before any polish.
+    pub linear_chi2: f64,
+    /// Seconds spent in the linear formulation.
+    pub linear_seconds: f64,
+    /// Seconds spent polishing.
+    pub polish_seconds: f64,
+    /// The polish report, when it ran.
+    pub polish: Option<LmReport>,
+    /// For the virtual-frame formulations: the global scale ρ.
+    pub rho: Option<f64>,
+    /// For the virtual-frame formulations: the median axis length at ρ = 1.
+    pub median_axis_length: Option<f64>,
+}
+
+impl BatchSolution {
+    /// Total solve time (I/O excluded).
+    pub fn seconds(&self) -> f64 {
+        self.linear_seconds + self.polish_seconds
+    }
+}
+
+/// Solves a whole graph at once.
+pub fn solve_batch(graph: &PoseGraph, options: &BatchOptions) -> Result<BatchSolution, SolveError> {
+    graph.check_connected()?;
+    let start = Instant::now();
+    let (mut rho, mut median_axis_length) = (None, None);
+    let poses = match options.formulation {
+        Formulation::TwoStage => two_stage::solve(graph)?,
+        Formulation::Odometry => graph.compose_spanning_tree()?,
+        Formulation::VirtualFrame | Formulation::VirtualFramePivot => {
+            let pivot = match options.formulation {
+                Formulation::VirtualFrame => Pivot::Printed,
+                _ => Pivot::AxisX,
+            };
+            let s = virtual_frame::solve(graph, pivot)?;
+            rho = Some(s.rho);
+            median_axis_length = Some(s.median_axis_length);
+            s.poses
+        }
+    };
+    let linear_seconds = start.elapsed().as_secs_f64();
+    let linear_chi2 = chi2(graph, &poses);
+    let (poses, polish_report, polish_seconds) = if options.polish {
+        let start = Instant::now();
+        let report = polish(graph.edges(), poses, options.lm)?;
+        let secs = start.elapsed().as_secs_f64();
+        (report.poses.clone(), Some(report), secs)
+    } else {
+        (poses, None, 0.0)
+    };
+    Ok(BatchSolution {
+        chi2: chi2(graph, &poses),
+        poses,
+        linear_chi2,
+        linear_seconds,
+        polish_seconds,
+        polish: polish_report,
+        rho,
+        median_axis_length,
+    })
+}

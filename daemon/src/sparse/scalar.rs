@@ -1,0 +1,93 @@
+//! [`Scalar`]: the two fields slamd solves in, `f64` and complex `c64`.
+
+use faer::c64;
+use std::fmt::Debug;
+use std::ops::{Add, AddAssign, Div, Mul, MulAssign, Neg, Sub, SubAssign};
+
+/// A real or complex scalar. Complex systems are Hermitian: the normal
+/// matrix of weighted rows `c` is `Σ w c̄ cᵀ`.
+pub trait Scalar:
+    faer::traits::ComplexField
+    + Copy
+    + Debug
+    + Default
+    + PartialEq
+    + Send
+    + Sync
+    + 'static
+    + Add<Output = Self>
+    + Sub<Output = Self>
+    + Mul<Output = Self>
+    + Div<Output = Self>
+    + Neg<Output = Self>
+    + AddAssign
+    + SubAssign
+    + MulAssign
+{
+    /// Complex conjugate (identity for reals).
+    fn conjugate(self) -> Self;
+    /// `|x|²`.
+    fn abs2(self) -> f64;
+    /// Embeds a real number.
+    fn from_real(x: f64) -> Self;
+    /// Real part.
+    fn real(self) -> f64;
+    /// Widens to a complex number.
+    fn to_c64(self) -> c64;
+    /// Multiplies by a real number.
+    fn scale(self, r: f64) -> Self;
+}
+
+impl Scalar for f64 {
+    #[inline]
+    fn conjugate(self) -> Self {
+        self
+    }
+    #[inline]
+    fn abs2(self) -> f64 {
+        self * self
+    }
+    #[inline]
+    fn from_real(x: f64) -> Self {
+        x
+    }
+    #[inline]
+    fn real(self) -> f64 {
+        self
+    }
+    #[inline]
+    fn to_c64(self) -> c64 {
+        c64::new(self, 0.0)
+    }
+    #[inline]
+    fn scale(self, r: f64) -> Self {
+        self * r
+    }
+}
+
+impl Scalar for c64 {
+    #[inline]
+    fn conjugate(self) -> Self {
+        self.conj()
+    }
+    #[inline]
+    fn abs2(self) -> f64 {
+        self.norm_sqr()
+    }
+    #[inline]
+    fn from_real(x: f64) -> Self {
+        c64::new(x, 0.0)
+    }
+    #[inline]
+    fn real(self) -> f64 {
+        self.re
+    }
+    #[inline]
+    fn to_c64(self) -> c64 {
+        self
+    }
+    #[inline]
+    fn scale(self, r: f64) -> Self {
+        self * r
+    }
+}
