@@ -1,0 +1,23 @@
+//! The command line: one subcommand per mode, each in its own file.
+
+use clap::{Parser, Subcommand};
+
+/// slamd: a streaming pose-graph SLAM backend.
+#[derive(Parser, Debug)]
+#[command(name = "slamd", version, about)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+pub enum Command {
+    /// Solve a whole graph file at once and report χ², ATE and time.
+    Solve(crate::solve::SolveOpts),
+    /// Run the demo: solve the built-in synthetic world and draw its map.
+    Demo(crate::demo::DemoOpts),
+    /// Write the built-in synthetic world as a g2o file plus ground truth.
+    Synth(crate::synth::SynthOpts),
+    /// Score a pose table on a graph: χ² and ATE, as `solve` computes them.
+    Eval(crate::eval::EvalOpts),
+}

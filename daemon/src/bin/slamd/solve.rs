@@ -1,0 +1,157 @@
+//! `slamd solve FILE`: the batch pipeline on one graph file.
+
+use anyhow::Context;
+use clap::Args;
+use slamd::eval::ate;
+use slamd::graph::PoseGraph;
+use slamd::io::{self, svg};
+use slamd::solver::{solve_batch, BatchOptions, Formulation};
+use std::path::PathBuf;
+
+#[derive(Args, Debug)]
+pub struct SolveOpts {
+    /// Graph file: g2o (.g2o), TORO (.graph) or iSAM (.txt).
+    pub file: PathBuf,
+    /// Linear formulation: two-stage, virtual-frame, virtual-frame-pivot, odometry.
+    #[arg(long, default_value = "two-stage")]
+    pub formulation: Formulation,
+    /// Polish with Levenberg–Marquardt after the linear solve.
+    #[arg(long)]
+    pub polish: bool,
+    /// Ground truth: a pose table or a noise-free graph file.
+    #[arg(long)]
+    pub ground_truth: Option<PathBuf>,
+    /// Write the result: `.g2o` as a graph, anything else as `id x y theta`.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Draw the estimate over the ground truth and the initial guess.
+    #[arg(long)]
+    pub plot: Option<PathBuf>,
+    /// Print one JSON object instead of a table.
+    #[arg(long)]
+    pub json: bool,
+}
+
+pub fn run(opts: SolveOpts) -> anyhow::Result<()> {
+    let graph = io::read_graph(&opts.file)?;
+    let truth = opts
+        .ground_truth
+        .as_deref()
+        .map(io::read_ground_truth)
+        .transpose()?;
+    let options = BatchOptions {
+        formulation: opts.formulation,
+        polish: opts.polish,
+        ..Default::default()
+    };
+    let sol = solve_batch(&graph, &options).with_context(|| format!("solving {}", opts.file.display()))?;
+    let ate = truth.as_ref().and_then(|t| ate(&graph, &sol.poses, t));
+
+    if let Some(out) = &opts.out {
+        write_result(out, &graph, &sol.poses)?;
+    }
+    if let Some(plot) = &opts.plot {
+        let guess = graph.initial_guess()?;
+        let truth_poses: Option<Vec<_>> = truth.as_ref().map(|t| {
+            graph
+                .keyframes()
+                .iter()
+                .filter_map(|k| t.get(&k.id).copied())
+                .collect()
+        });
+        let aligned_truth = truth_poses.map(|t| slamd::eval::aligned_onto(&t, &sol.poses));
+        let mut layers = vec![svg::Layer {
+            label: "estimate",
+            poses: &sol.poses,
+            color: svg::ESTIMATE,
+        }];
+        if let Some(t) = &aligned_truth {
+            layers.push(svg::Layer {
+                label: "ground truth",
+                poses: t,
+                color: svg::TRUTH,
+            });
+        }
+        layers.push(svg::Layer {
+            label: "initial guess",
+            poses: &guess,
+            color: svg::GUESS,
+        });
+        let title = format!(
+            "{} ({}{})",
+            file_name(&opts.file),
+            opts.formulation,
+            if opts.polish { " + polish" } else { "" }
+        );
+        svg::write_svg(plot, &title, &layers).map_err(anyhow::Error::msg)?;
+    }
+
+    let iterations = sol.polish.as_ref().map(|r| r.iterations.len());
+    if opts.json {
+        let v = serde_json::json!({
+            "file": opts.file.display().to_string(),
+            "formulation": opts.formulation.name(),
+            "polish": opts.polish,
+            "nodes": graph.len(),
+            "edges": graph.edges().len(),
+            "chi2": sol.chi2,
+            "linear_chi2": sol.linear_chi2,
+            "ate": ate.map(|a| a.rmse),
+            "seconds": sol.seconds(),
+            "linear_seconds": sol.linear_seconds,
+            "polish_seconds": sol.polish_seconds,
+            "iterations": iterations,
+            "rho": sol.rho,
+            "median_axis_length": sol.median_axis_length,
+        });
+        println!("{v}");
+    } else {
+        println!("file           {}", opts.file.display());
+        println!("keyframes      {}", graph.len());
+        println!("edges          {}", graph.edges().len());
+        println!("formulation    {}", opts.formulation);
+        println!(
+            "linear chi2    {:.3}  ({:.1} ms)",
+            sol.linear_chi2,
+            sol.linear_seconds * 1e3
+        );
+        if let Some(r) = &sol.polish {
+            println!(
+                "polish         {} iterations, converged: {}  ({:.1} ms)",
+                r.iterations.len(),
+                r.converged,
+                sol.polish_seconds * 1e3
+            );
+        }
+        if let (Some(rho), Some(m)) = (sol.rho, sol.median_axis_length) {
+            println!("scale rho      {rho:.4}  (median virtual axis {m:.4} before scaling; truth 1)");
+        }
+        println!("chi2           {:.3}", sol.chi2);
+        if let Some(a) = ate {
+            println!("ate            {:.4} m  over {} keyframes", a.rmse, a.matched);
+        }
+        println!("seconds        {:.4}", sol.seconds());
+    }
+    Ok(())
+}
+
+fn write_result(
+    out: &std::path::Path,
+    graph: &PoseGraph,
+    poses: &[slamd::geometry::Pose2],
+) -> anyhow::Result<()> {
+    let file = std::fs::File::create(out).with_context(|| format!("creating {}", out.display()))?;
+    let mut w = std::io::BufWriter::new(file);
+    if out.extension().is_some_and(|e| e == "g2o") {
+        io::write_g2o(&mut w, graph, poses)?;
+    } else {
+        io::write_pose_table(&mut w, graph, poses)?;
+    }
+    Ok(())
+}
+
+pub fn file_name(p: &std::path::Path) -> String {
+    p.file_name()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default()
+}
