@@ -1,0 +1,81 @@
+//! The `slamd` command line, end to end.
+
+use slamd_tests::{dataset, run_json, run_slamd};
+use std::io::Write;
+
+#[test]
+fn solve_json_reports_the_required_fields() {
+    let file = dataset("intel_sesync.g2o");
+    let v = run_json(&["solve", file.to_str().expect("utf-8"), "--polish", "--json"]);
+    assert_eq!(v["nodes"], 1728);
+    assert_eq!(v["edges"], 2512);
+    let chi2 = v["chi2"].as_f64().expect("chi2");
+    assert!((chi2 - 45.005).abs() < 0.01, "{chi2}");
+    assert!(v["seconds"].as_f64().expect("seconds") > 0.0);
+    assert!(v["ate"].is_null(), "no ground truth given");
+}
+
+#[test]
+fn solve_with_ground_truth_reports_ate_and_writes_outputs() {
+    let dir = std::env::temp_dir().join(format!("slamd-cli-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("tmp");
+    let (out, svg) = (dir.join("ring.g2o"), dir.join("ring.svg"));
+    let v = run_json(&[
+        "solve",
+        dataset("ring.g2o").to_str().expect("utf-8"),
+        "--polish",
+        "--ground-truth",
+        dataset("groundtruth/ring_groundtruth.g2o")
+            .to_str()
+            .expect("utf-8"),
+        "--out",
+        out.to_str().expect("utf-8"),
+        "--plot",
+        svg.to_str().expect("utf-8"),
+        "--json",
+    ]);
+    assert!(v["ate"].as_f64().expect("ate") < 2.0);
+    // The written g2o reads back with the same χ².
+    let back = slamd::io::read_graph(&out).expect("readable");
+    let poses: Vec<_> = back
+        .keyframes()
+        .iter()
+        .map(|k| k.guess.expect("vertex"))
+        .collect();
+    let chi2 = slamd::graph::chi2(&back, &poses);
+    assert!((chi2 - v["chi2"].as_f64().expect("chi2")).abs() < 1e-3 * chi2);
+    let picture = std::fs::read_to_string(&svg).expect("svg written");
+    assert!(
+        picture.contains("<svg") && picture.contains("ground truth") && picture.contains("initial guess")
+    );
+}
+
+#[test]
+fn malformed_file_gives_line_and_reason_and_exit_code_2() {
+    let path = std::env::temp_dir().join(format!("slamd-bad-{}.g2o", std::process::id()));
+    let mut f = std::fs::File::create(&path).expect("tmp");
+    writeln!(
+        f,
+        "VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 1 0 0\nEDGE_SE2 0 1 1 0 0 1 0 0 inf 0 1"
+    )
+    .expect("write");
+    let (code, _, err) = run_slamd(&["solve", path.to_str().expect("utf-8")]);
+    assert_eq!(code, 2);
+    assert!(err.contains(":3: EDGE_SE2: non-finite number `inf`"), "{err}");
+}
+
+#[test]
+fn disconnected_graph_is_an_error_not_a_nan() {
+    let path = std::env::temp_dir().join(format!("slamd-split-{}.g2o", std::process::id()));
+    std::fs::write(
+        &path,
+        "EDGE_SE2 0 1 1 0 0 1 0 0 1 0 1\nEDGE_SE2 2 3 1 0 0 1 0 0 1 0 1\n",
+    )
+    .expect("write");
+    let (code, _, err) = run_slamd(&["solve", path.to_str().expect("utf-8")]);
+    assert_eq!(code, 2);
+    assert!(
+        err.contains("keyframe 2 has no chain of edges to keyframe 0"),
+        "{err}"
+    );
+}

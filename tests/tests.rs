@@ -1,0 +1,5 @@
+//! slamd's integration tests, one target.
+
+mod accuracy;
+mod cli;
+mod formulations;

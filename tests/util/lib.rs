@@ -1,0 +1,102 @@
+//! Helpers shared by slamd's integration tests and benchmarks: where the
+//! shared datasets live, noise-free synthetic graphs, and a handle on the
+//! `slamd` binary.
+
+use slamd::geometry::Pose2;
+use slamd::graph::{EdgeKind, Information, PoseGraph};
+use std::path::PathBuf;
+use std::process::Command;
+use std::sync::OnceLock;
+
+/// The shared datasets, `../shared/datasets` beside the repository.
+pub fn datasets() -> PathBuf {
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/datasets");
+    assert!(
+        dir.join("README.md").exists(),
+        "the shared datasets must sit beside the repository at {}",
+        dir.display()
+    );
+    dir
+}
+
+/// One shared dataset file.
+pub fn dataset(name: &str) -> PathBuf {
+    datasets().join(name)
+}
+
+/// Reads a shared dataset.
+pub fn read(name: &str) -> PoseGraph {
+    slamd::io::read_graph(&dataset(name)).unwrap_or_else(|e| panic!("{e}"))
+}
+
+/// A graph whose every edge is the exact relative pose between `truth`
+/// poses: keyframe ids `0..n`, the pairs given, unit information scaled per
+/// edge so that weights differ.
+pub fn noise_free(truth: &[Pose2], pairs: &[(usize, usize)]) -> PoseGraph {
+    let mut g = PoseGraph::default();
+    for id in 0..truth.len() as u64 {
+        g.add_keyframe(id, None).expect("fresh id");
+    }
+    for (k, &(i, j)) in pairs.iter().enumerate() {
+        let m = truth[i].between(&truth[j]);
+        let w = 1.0 + (k % 7) as f64;
+        let info = Information::from_upper([10.0 * w, 1.0, 0.5, 20.0 * w, -0.5, 30.0 * w]).expect("SPD");
+        g.add_edge(
+            i as u64,
+            j as u64,
+            m,
+            info,
+            EdgeKind::from_ids(i as u64, j as u64),
+        )
+        .expect("valid edge");
+    }
+    g
+}
+
+/// The largest position or heading difference between two pose lists.
+pub fn max_pose_error(a: &[Pose2], b: &[Pose2]) -> f64 {
+    a.iter()
+        .zip(b)
+        .map(|(p, q)| {
+            let dt = slamd::geometry::wrap_angle(p.theta - q.theta).abs();
+            (p.x - q.x).abs().max((p.y - q.y).abs()).max(dt)
+        })
+        .fold(0.0, f64::max)
+}
+
+/// The `slamd` binary of this workspace, built once per test run.
+pub fn slamd_bin() -> PathBuf {
+    static BIN: OnceLock<PathBuf> = OnceLock::new();
+    BIN.get_or_init(|| {
+        let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+        let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..");
+        let status = Command::new(cargo)
+            .args(["build", "-q", "-p", "slamd", "--bin", "slamd"])
+            .current_dir(&root)
+            .status()
+            .expect("run cargo build");
+        assert!(status.success(), "building the slamd binary failed");
+        let target = std::env::var("CARGO_TARGET_DIR")
+            .map(PathBuf::from)
+            .unwrap_or_else(|_| root.join("target"));
+        target.join("debug").join("slamd")
+    })
+    .clone()
+}
+
+/// Runs `slamd` with `args`; returns (exit code, stdout, stderr).
+pub fn run_slamd(args: &[&str]) -> (i32, String, String) {
+    let out = Command::new(slamd_bin()).args(args).output().expect("run slamd");
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+/// Runs `slamd … --json` and parses its one JSON object.
+pub fn run_json(args: &[&str]) -> serde_json::Value {
+    let (code, out, err) = run_slamd(args);
+    assert_eq!(code, 0, "slamd {args:?} failed: {err}");
+    serde_json::from_str(out.trim()).unwrap_or_else(|e| panic!("not JSON ({e}): {out}"))
+}
