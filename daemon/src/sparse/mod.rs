@@ -6,8 +6,11 @@
 //!   blocks for the 3-variable poses of Gauss–Newton).
 //! - [`SparseCholesky`]: faer's sparse LLᴴ with the symbolic analysis done
 //!   once and reused while only the values change.
+//! - [`dynamic`]: a factor that grows and changes in place (append,
+//!   rank-1 update and downdate) with an incrementally maintained solve.
 
 mod cholesky;
+pub mod dynamic;
 pub mod ordering;
 mod scalar;
 mod upper;

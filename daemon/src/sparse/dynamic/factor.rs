@@ -1,0 +1,199 @@
+//! The factor's storage, its construction from faer, and appending.
+
+use crate::sparse::{FactorError, Scalar, UpperCsc};
+use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::linalg::cholesky::ldlt::factor::LdltError;
+use faer::linalg::cholesky::ldlt::factor::LdltRegularization;
+use faer::sparse::linalg::cholesky::{
+    factorize_symbolic_cholesky, CholeskySymbolicParams, SymbolicCholeskyRaw, SymmetricOrdering,
+};
+use faer::sparse::linalg::SupernodalThreshold;
+use faer::{Par, Side, Spec};
+
+/// One column of `L` below the diagonal.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct Column<T> {
+    pub(crate) rows: Vec<u32>,
+    pub(crate) vals: Vec<T>,
+}
+
+/// A sparse `L D Lᴴ` factor in the elimination order (column `k` is the
+/// `k`-th variable eliminated).
+#[derive(Clone, Debug, Default)]
+pub struct DynamicLdlt<T> {
+    pub(crate) cols: Vec<Column<T>>,
+    pub(crate) d: Vec<f64>,
+    pub(crate) children: Vec<Vec<u32>>,
+    /// Dense accumulator for `w`, all zero between calls.
+    pub(crate) work: Vec<T>,
+    pub(crate) scratch_rows: Vec<u32>,
+    pub(crate) scratch_vals: Vec<T>,
+    pub(crate) carry: Vec<u32>,
+}
+
+impl<T: Scalar> DynamicLdlt<T> {
+    /// An empty factor (no variables).
+    pub fn new() -> Self {
+        Self {
+            cols: Vec::new(),
+            d: Vec::new(),
+            children: Vec::new(),
+            work: Vec::new(),
+            scratch_rows: Vec::new(),
+            scratch_vals: Vec::new(),
+            carry: Vec::new(),
+        }
+    }
+
+    /// Factorises `P A Pᵀ` with faer's simplicial LDLᴴ, where `perm[k]` is
+    /// the variable of `a` eliminated `k`-th. Column `k` of the result is
+    /// variable `perm[k]`.
+    pub fn from_matrix(a: &UpperCsc<T>, perm: &[usize]) -> Result<Self, FactorError> {
+        let n = a.n();
+        let inv = crate::sparse::ordering::invert(perm);
+        let params = CholeskySymbolicParams {
+            supernodal_flop_ratio_threshold: SupernodalThreshold::FORCE_SIMPLICIAL,
+            ..Default::default()
+        };
+        let order = SymmetricOrdering::Custom(faer::perm::PermRef::new_checked(perm, &inv, n));
+        let symbolic = factorize_symbolic_cholesky(a.symbolic(), Side::Upper, order, params)
+            .map_err(|_| FactorError::Symbolic)?;
+        let mut values = vec![T::default(); symbolic.len_val()];
+        let req = symbolic.factorize_numeric_ldlt_scratch::<T>(Par::Seq, Spec::default());
+        let mut buf = MemBuffer::new(req);
+        symbolic
+            .factorize_numeric_ldlt(
+                &mut values,
+                a.as_faer(),
+                Side::Upper,
+                LdltRegularization::default(),
+                Par::Seq,
+                MemStack::new(&mut buf),
+                Spec::default(),
+            )
+            .map_err(|e| match e {
+                LdltError::ZeroPivot { index } => FactorError::NotPositiveDefinite { step: index },
+            })?;
+        let SymbolicCholeskyRaw::Simplicial(s) = symbolic.raw() else {
+            return Err(FactorError::Symbolic);
+        };
+        let (col_ptr, row_idx) = (s.col_ptr(), s.row_idx());
+        let mut f = Self::new();
+        for k in 0..n {
+            let (start, end) = (col_ptr[k], col_ptr[k + 1]);
+            // faer stores D_k as the first (diagonal) entry of column k
+            let dk = values[start].real();
+            if dk.is_nan() || dk <= 0.0 {
+                return Err(FactorError::NotPositiveDefinite { step: k });
+            }
+            f.d.push(dk);
+            f.cols.push(Column {
+                rows: row_idx[start + 1..end].iter().map(|&r| r as u32).collect(),
+                vals: values[start + 1..end].to_vec(),
+            });
+        }
+        f.work = vec![T::default(); n];
+        f.rebuild_children();
+        Ok(f)
+    }
+
+    /// Adds a variable as the last column, uncoupled, with `D = 0` until an
+    /// update gives it weight. Returns its column.
+    pub fn append(&mut self) -> usize {
+        self.cols.push(Column::default());
+        self.d.push(0.0);
+        self.children.push(Vec::new());
+        self.work.push(T::default());
+        self.cols.len() - 1
+    }
+
+    /// Number of variables.
+    pub fn len(&self) -> usize {
+        self.cols.len()
+    }
+
+    /// True with no variables.
+    pub fn is_empty(&self) -> bool {
+        self.cols.is_empty()
+    }
+
+    /// Stored entries of `L` below the diagonal.
+    pub fn nnz(&self) -> usize {
+        self.cols.iter().map(|c| c.rows.len()).sum()
+    }
+
+    /// `D_k`.
+    pub fn d(&self, k: usize) -> f64 {
+        self.d[k]
+    }
+
+    /// The parent of column `k` in the elimination tree: its first
+    /// off-diagonal row.
+    pub fn parent(&self, k: usize) -> Option<usize> {
+        self.cols[k].rows.first().map(|&r| r as usize)
+    }
+
+    /// Children of column `k` in the elimination tree (unordered).
+    pub fn children(&self, k: usize) -> &[u32] {
+        &self.children[k]
+    }
+
+    /// Rows and values of column `k` of `L` below the diagonal.
+    pub fn column(&self, k: usize) -> (&[u32], &[T]) {
+        (&self.cols[k].rows, &self.cols[k].vals)
+    }
+
+    pub(crate) fn rebuild_children(&mut self) {
+        self.children = vec![Vec::new(); self.cols.len()];
+        for k in 0..self.cols.len() {
+            if let Some(p) = self.parent(k) {
+                self.children[p].push(k as u32);
+            }
+        }
+    }
+
+    /// Moves column `k` from the children of `old` to those of its parent.
+    pub(crate) fn reparent(&mut self, k: usize, old: Option<usize>) {
+        let new = self.parent(k);
+        if new == old {
+            return;
+        }
+        if let Some(o) = old {
+            let list = &mut self.children[o];
+            if let Some(pos) = list.iter().position(|&c| c as usize == k) {
+                list.swap_remove(pos);
+            }
+        }
+        if let Some(p) = new {
+            self.children[p].push(k as u32);
+        }
+    }
+
+    /// `L D Lᴴ` as a dense row-major matrix (tests and small checks).
+    pub fn to_dense(&self) -> Vec<Vec<T>> {
+        let n = self.len();
+        // column k of L, dense
+        let l: Vec<Vec<T>> = (0..n)
+            .map(|k| {
+                let mut col = vec![T::default(); n];
+                col[k] = T::from_real(1.0);
+                for (&r, &v) in self.cols[k].rows.iter().zip(&self.cols[k].vals) {
+                    col[r as usize] = v;
+                }
+                col
+            })
+            .collect();
+        (0..n)
+            .map(|i| {
+                (0..n)
+                    .map(|j| {
+                        l.iter()
+                            .zip(&self.d)
+                            .take(i.min(j) + 1)
+                            .fold(T::default(), |s, (lk, &dk)| s + lk[i] * lk[j].conjugate().scale(dk))
+                    })
+                    .collect()
+            })
+            .collect()
+    }
+}

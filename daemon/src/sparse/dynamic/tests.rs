@@ -1,0 +1,246 @@
+//! Property tests: every sequence of appends, updates and downdates keeps
+//! `L D Lᴴ = A`, and the incremental solve matches a dense solve.
+
+use super::{DynamicLdlt, IncrementalCholesky};
+use crate::sparse::{Scalar, UpperCsc};
+use faer::c64;
+use nalgebra::DMatrix;
+use proptest::prelude::*;
+
+/// One change to the system.
+#[derive(Clone, Debug)]
+enum Op {
+    Append,
+    /// Update with a sparse w (positions taken modulo n, weights).
+    Update(Vec<(usize, f64, f64)>),
+    /// Downdate of the update applied `k` ops back (mod the applied count).
+    UndoUpdate(usize),
+    Rhs(usize, f64, f64),
+}
+
+fn op() -> impl Strategy<Value = Op> {
+    prop_oneof![
+        1 => Just(Op::Append),
+        4 => prop::collection::vec((0usize..64, -2.0..2.0f64, -2.0..2.0f64), 1..5).prop_map(Op::Update),
+        2 => (0usize..64).prop_map(Op::UndoUpdate),
+        2 => (0usize..64, -3.0..3.0f64, -3.0..3.0f64).prop_map(|(k, a, b)| Op::Rhs(k, a, b)),
+    ]
+}
+
+trait FromParts: Scalar {
+    fn from_parts(re: f64, im: f64) -> Self;
+}
+impl FromParts for f64 {
+    fn from_parts(re: f64, _: f64) -> Self {
+        re
+    }
+}
+impl FromParts for c64 {
+    fn from_parts(re: f64, im: f64) -> Self {
+        c64::new(re, im)
+    }
+}
+
+fn to_c(v: &[Vec<impl Scalar>]) -> DMatrix<c64> {
+    DMatrix::from_fn(v.len(), v.len(), |i, j| v[i][j].to_c64())
+}
+
+/// A random sparse SPD start: diagonal plus a few rank-1 terms.
+fn start<M: FromParts>(n: usize, seed: &[(usize, usize, f64, f64)]) -> (UpperCsc<M>, DMatrix<c64>) {
+    let mut dense = DMatrix::<c64>::from_diagonal_element(n, n, c64::new(1.0, 0.0));
+    for &(i, j, a, b) in seed {
+        let (i, j) = (i % n, j % n);
+        if i != j {
+            let v = M::from_parts(a, b).to_c64();
+            // A += e_i e_iᴴ + e_j e_jᴴ + v e_i e_jᴴ + conj(v) e_j e_iᴴ, kept PD by the diagonal
+            dense[(i, i)] += c64::new(v.norm(), 0.0);
+            dense[(j, j)] += c64::new(v.norm(), 0.0);
+            dense[(i, j)] += v;
+            dense[(j, i)] += v.conj();
+        }
+    }
+    let mut entries = Vec::new();
+    for c in 0..n {
+        for r in 0..=c {
+            let v = dense[(r, c)];
+            if v.norm() > 0.0 {
+                entries.push((r, c, M::from_parts(v.re, v.im)));
+            }
+        }
+    }
+    (UpperCsc::from_triplets(n, &entries), dense)
+}
+
+fn close(a: &DMatrix<c64>, b: &DMatrix<c64>, tol: f64) -> bool {
+    let scale = a.iter().map(|v| v.norm()).fold(1.0, f64::max);
+    a.iter().zip(b.iter()).all(|(x, y)| (x - y).norm() <= tol * scale)
+}
+
+fn run<M: FromParts, V: FromParts + std::ops::Mul<M, Output = V>>(
+    n: usize,
+    seed: Vec<(usize, usize, f64, f64)>,
+    perm_seed: u64,
+    ops: Vec<Op>,
+) -> Result<(), TestCaseError> {
+    let (a, mut dense) = start::<M>(n, &seed);
+    // a random permutation
+    let mut perm: Vec<usize> = (0..n).collect();
+    let mut s = perm_seed;
+    for i in (1..n).rev() {
+        s = s
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        perm.swap(i, (s >> 33) as usize % (i + 1));
+    }
+    let f = DynamicLdlt::<M>::from_matrix(&a, &perm).map_err(|e| TestCaseError::fail(e.to_string()))?;
+    // dense is in the original order; permute it into the factor's order
+    let mut dense_p = DMatrix::from_fn(n, n, |i, j| dense[(perm[i], perm[j])]);
+    prop_assert!(
+        close(&to_c(&f.to_dense()), &dense_p, 1e-12),
+        "fresh factor differs"
+    );
+    dense = dense_p.clone();
+    let mut b = vec![V::default(); n];
+    let mut chol = IncrementalCholesky::<M, V>::new(f, b.clone());
+    let mut applied: Vec<Vec<(usize, M)>> = Vec::new();
+    for op in ops {
+        let n = chol.len();
+        match op {
+            Op::Append => {
+                chol.append();
+                b.push(V::default());
+                // a new variable needs weight before it can be solved
+                let k = n;
+                let w = vec![(k, M::from_real(1.0))];
+                chol.rank1(&w, 1.0)
+                    .map_err(|e| TestCaseError::fail(e.to_string()))?;
+                dense = dense
+                    .insert_row(n, c64::new(0.0, 0.0))
+                    .insert_column(n, c64::new(0.0, 0.0));
+                dense[(k, k)] = c64::new(1.0, 0.0);
+                applied.push(w);
+            }
+            Op::Update(entries) => {
+                let mut w: Vec<(usize, M)> = Vec::new();
+                for (i, re, im) in entries {
+                    let i = i % n;
+                    if !w.iter().any(|&(j, _)| j == i) {
+                        w.push((i, M::from_parts(re, im)));
+                    }
+                }
+                chol.rank1(&w, 1.0)
+                    .map_err(|e| TestCaseError::fail(e.to_string()))?;
+                for &(i, vi) in &w {
+                    for &(j, vj) in &w {
+                        dense[(i, j)] += vi.to_c64() * vj.to_c64().conj();
+                    }
+                }
+                applied.push(w);
+            }
+            Op::UndoUpdate(k) if !applied.is_empty() => {
+                let w = applied.remove(k % applied.len());
+                // only undo what leaves the matrix positive definite
+                let mut trial = dense.clone();
+                for &(i, vi) in &w {
+                    for &(j, vj) in &w {
+                        trial[(i, j)] -= vi.to_c64() * vj.to_c64().conj();
+                    }
+                }
+                if trial
+                    .clone()
+                    .cholesky()
+                    .is_some_and(|c| c.l().diagonal().iter().all(|d| d.re > 1e-3))
+                {
+                    chol.rank1(&w, -1.0)
+                        .map_err(|e| TestCaseError::fail(e.to_string()))?;
+                    dense = trial;
+                }
+            }
+            Op::UndoUpdate(_) => {}
+            Op::Rhs(k, re, im) => {
+                let v = V::from_parts(re, im);
+                chol.add_rhs(k % n, v);
+                b[k % n] += v;
+            }
+        }
+        prop_assert!(
+            close(&to_c(&chol.factor().to_dense()), &dense, 1e-9),
+            "factor drifted from A"
+        );
+        chol.solve(0.0);
+        let rhs = nalgebra::DVector::from_iterator(b.len(), b.iter().map(|v| v.to_c64()));
+        let expected = dense.clone().cholesky().expect("SPD").solve(&rhs);
+        let scale = expected.iter().map(|v| v.norm()).fold(1.0, f64::max);
+        for (got, want) in chol.x().iter().zip(expected.iter()) {
+            prop_assert!(
+                (got.to_c64() - want).norm() <= 1e-8 * scale,
+                "x {got:?} vs {want}"
+            );
+        }
+        dense_p = dense.clone();
+    }
+    let _ = dense_p;
+    Ok(())
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 64, ..ProptestConfig::default() })]
+
+    #[test]
+    fn real_updates_match_dense(n in 1usize..20, seed in prop::collection::vec((0usize..40, 0usize..40, -1.0..1.0f64, -1.0..1.0f64), 0..30), p in any::<u64>(), ops in prop::collection::vec(op(), 1..40)) {
+        run::<f64, f64>(n, seed, p, ops)?;
+    }
+
+    #[test]
+    fn complex_updates_match_dense(n in 1usize..20, seed in prop::collection::vec((0usize..40, 0usize..40, -1.0..1.0f64, -1.0..1.0f64), 0..30), p in any::<u64>(), ops in prop::collection::vec(op(), 1..40)) {
+        run::<c64, c64>(n, seed, p, ops)?;
+    }
+
+    #[test]
+    fn real_matrix_complex_vectors(n in 1usize..20, seed in prop::collection::vec((0usize..40, 0usize..40, -1.0..1.0f64, -1.0..1.0f64), 0..30), p in any::<u64>(), ops in prop::collection::vec(op(), 1..40)) {
+        run::<f64, c64>(n, seed, p, ops)?;
+    }
+}
+
+#[test]
+fn downdate_undoes_an_update_exactly_enough() {
+    let (a, _) = start::<f64>(8, &[(0, 3, 0.5, 0.0), (2, 7, -0.3, 0.0), (4, 5, 0.9, 0.0)]);
+    let mut f = DynamicLdlt::<f64>::from_matrix(&a, &(0..8).collect::<Vec<_>>()).unwrap();
+    let before = f.to_dense();
+    let w = [(1, 0.7), (6, -1.2), (3, 0.4)];
+    f.update(&w);
+    assert!(f.nnz() > 0);
+    f.downdate(&w).unwrap();
+    let after = f.to_dense();
+    for (r1, r2) in before.iter().zip(&after) {
+        for (x, y) in r1.iter().zip(r2) {
+            assert!((x - y).abs() < 1e-12);
+        }
+    }
+}
+
+#[test]
+fn downdate_to_an_indefinite_matrix_is_refused() {
+    let (a, _) = start::<f64>(3, &[]);
+    let mut f = DynamicLdlt::<f64>::from_matrix(&a, &[0, 1, 2]).unwrap();
+    assert!(f.downdate(&[(1, 2.0)]).is_err());
+}
+
+#[test]
+fn update_walks_only_the_elimination_path() {
+    // A chain 0-1-2-3-4 plus an isolated 5: updating (3, 4) must not touch
+    // columns 0..3 or 5.
+    let mut e = vec![];
+    for i in 0..6 {
+        e.push((i, i, 2.0));
+    }
+    for i in 0..4 {
+        e.push((i, i + 1, -1.0));
+    }
+    let a = UpperCsc::from_triplets(6, &e);
+    let mut f = DynamicLdlt::<f64>::from_matrix(&a, &(0..6).collect::<Vec<_>>()).unwrap();
+    let mut touched = vec![];
+    f.rank1_with(&[(3, 1.0), (4, -1.0)], 1.0, |j, _| touched.push(j))
+        .unwrap();
+    assert_eq!(touched, vec![3, 4]);
+}
