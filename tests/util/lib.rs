@@ -64,6 +64,20 @@ pub fn max_pose_error(a: &[Pose2], b: &[Pose2]) -> f64 {
         .fold(0.0, f64::max)
 }
 
+/// [`max_pose_error`] with positions relative to the extent of `truth`
+/// (at least 1 m) and headings absolute: the scale-free measure of "to
+/// 1e-9" for a problem that has no length scale of its own.
+pub fn relative_pose_error(a: &[Pose2], truth: &[Pose2]) -> f64 {
+    let extent = truth.iter().map(|p| p.x.abs().max(p.y.abs())).fold(1.0, f64::max);
+    a.iter()
+        .zip(truth)
+        .map(|(p, q)| {
+            let dt = slamd::geometry::wrap_angle(p.theta - q.theta).abs();
+            ((p.x - q.x).abs().max((p.y - q.y).abs()) / extent).max(dt)
+        })
+        .fold(0.0, f64::max)
+}
+
 /// The `slamd` binary of this workspace, built once per test run.
 pub fn slamd_bin() -> PathBuf {
     static BIN: OnceLock<PathBuf> = OnceLock::new();
