@@ -97,6 +97,22 @@ impl PoseGraph {
         Ok(graph)
     }
 
+    /// A graph from keyframes (in index order, ids distinct) and edges that
+    /// already refer to keyframe indices.
+    pub fn from_parts(keyframes: Vec<Keyframe>, edges: Vec<Edge>) -> Result<Self, GraphError> {
+        let mut graph = PoseGraph::default();
+        for k in keyframes {
+            graph.add_keyframe(k.id, k.guess)?;
+        }
+        for e in &edges {
+            if e.from >= graph.len() || e.to >= graph.len() {
+                return Err(GraphError::UnknownKeyframe(e.from.max(e.to) as KeyframeId));
+            }
+        }
+        graph.edges = edges;
+        Ok(graph)
+    }
+
     /// Appends a keyframe and returns its index. Ids need not be sorted here,
     /// but index 0 (the gauge) is whichever keyframe comes first.
     pub fn add_keyframe(&mut self, id: KeyframeId, guess: Option<Pose2>) -> Result<usize, GraphError> {

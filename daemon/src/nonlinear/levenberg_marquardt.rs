@@ -11,14 +11,12 @@
 //! values and refactorises.
 
 use super::params::LevenbergMarquardtParams;
-use super::se2::linearize;
-use super::structure::{global_var, HessianStructure, NONE};
+use super::structure::{gauge_first_blocks, HessianStructure};
 use crate::geometry::Pose2;
 use crate::graph::pose_ordering;
 use crate::graph::{chi2_of_edges, Edge};
 use crate::sparse::ordering::expand_blocks;
 use crate::sparse::{FactorError, Ordering, SparseCholesky, UpperCsc};
-use nalgebra::{Matrix3x6, Matrix6, Vector6};
 
 /// The damping a rejected step raises λ to at least.
 const MIN_LAMBDA: f64 = 1e-12;
@@ -74,7 +72,8 @@ impl<'a> LevenbergMarquardt<'a> {
         initial: Vec<Pose2>,
         params: LevenbergMarquardtParams,
     ) -> Result<Self, FactorError> {
-        let structure = HessianStructure::new(initial.len(), edges);
+        let n = initial.len();
+        let structure = HessianStructure::new(gauge_first_blocks(n), n.saturating_sub(1), edges);
         let hessian = structure.pattern().clone();
         let poses = pose_ordering(initial.len(), edges);
         let factor = SparseCholesky::analyze(&hessian, &Ordering::Custom(expand_blocks(&poses, 3)))?;
@@ -116,30 +115,8 @@ impl<'a> LevenbergMarquardt<'a> {
 
     /// Refills `H` and `g` at the current poses.
     fn linearize(&mut self) {
-        self.hessian.values_mut().fill(0.0);
-        self.gradient.fill(0.0);
-        let values = self.hessian.values_mut();
-        for (k, edge) in self.edges.iter().enumerate() {
-            let lin = linearize(edge, &self.poses[edge.from], &self.poses[edge.to]);
-            let mut j = Matrix3x6::zeros();
-            j.fixed_view_mut::<3, 3>(0, 0).copy_from(&lin.a);
-            j.fixed_view_mut::<3, 3>(0, 3).copy_from(&lin.b);
-            let omega_j = edge.information.matrix() * j;
-            let h: Matrix6<f64> = j.transpose() * omega_j;
-            let g: Vector6<f64> = omega_j.transpose() * lin.error;
-            let slots = self.structure.edge_slots(k);
-            for a in 0..6 {
-                if let Some(ga) = global_var(edge, a) {
-                    self.gradient[ga] += g[a];
-                }
-                for b in 0..6 {
-                    let s = slots[6 * a + b];
-                    if s != NONE {
-                        values[s as usize] += h[(a, b)];
-                    }
-                }
-            }
-        }
+        self.structure
+            .assemble(self.edges, &self.poses, &mut self.hessian, &mut self.gradient);
     }
 
     /// One trial step: solve the damped system, keep the step if χ² drops.

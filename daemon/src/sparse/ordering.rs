@@ -70,6 +70,18 @@ pub fn amd_of_pairs(n: usize, pairs: impl Iterator<Item = (usize, usize)>) -> Ve
     ))
 }
 
+/// AMD on the first `n − recent` vertices, then the last `recent` in
+/// their given order. New edges attach to recent keyframes; keeping those
+/// at the root of the elimination tree keeps update paths short. (faer has
+/// no constrained AMD; this is the cheap form of GTSAM's
+/// `ColamdConstrainedLast`.)
+pub fn amd_newest_last(n: usize, pairs: impl Iterator<Item = (usize, usize)>, recent: usize) -> Vec<usize> {
+    let old = n.saturating_sub(recent);
+    let mut perm = amd_of_pairs(old, pairs.filter(|&(i, j)| i < old && j < old));
+    perm.extend(old..n);
+    perm
+}
+
 /// Expands a block permutation to scalars: block `b` becomes variables
 /// `size·b .. size·b + size`, kept together and in order.
 pub fn expand_blocks(block_perm: &[usize], size: usize) -> Vec<usize> {

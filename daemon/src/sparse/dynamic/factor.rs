@@ -24,11 +24,16 @@ pub struct DynamicLdlt<T> {
     pub(crate) cols: Vec<Column<T>>,
     pub(crate) d: Vec<f64>,
     pub(crate) children: Vec<Vec<u32>>,
-    /// Dense accumulator for `w`, all zero between calls.
+    /// Dense accumulators for the `w_t`, interleaved (`MAX_RANK` per
+    /// row), all zero between calls.
     pub(crate) work: Vec<T>,
     pub(crate) scratch_rows: Vec<u32>,
     pub(crate) scratch_vals: Vec<T>,
     pub(crate) carry: Vec<u32>,
+    /// Rows the last column of an update walk gained.
+    pub(crate) added: Vec<u32>,
+    /// Which vector each live pivot of a column belongs to.
+    pub(crate) slots: [u8; super::update::MAX_RANK],
 }
 
 impl<T: Scalar> DynamicLdlt<T> {
@@ -42,6 +47,8 @@ impl<T: Scalar> DynamicLdlt<T> {
             scratch_rows: Vec::new(),
             scratch_vals: Vec::new(),
             carry: Vec::new(),
+            added: Vec::new(),
+            slots: [0; super::update::MAX_RANK],
         }
     }
 
@@ -92,7 +99,7 @@ impl<T: Scalar> DynamicLdlt<T> {
                 vals: values[start + 1..end].to_vec(),
             });
         }
-        f.work = vec![T::default(); n];
+        f.work = vec![T::default(); n * super::update::MAX_RANK];
         f.rebuild_children();
         Ok(f)
     }
@@ -103,7 +110,7 @@ impl<T: Scalar> DynamicLdlt<T> {
         self.cols.push(Column::default());
         self.d.push(0.0);
         self.children.push(Vec::new());
-        self.work.push(T::default());
+        self.work.extend([T::default(); super::update::MAX_RANK]);
         self.cols.len() - 1
     }
 
@@ -190,7 +197,9 @@ impl<T: Scalar> DynamicLdlt<T> {
                         l.iter()
                             .zip(&self.d)
                             .take(i.min(j) + 1)
-                            .fold(T::default(), |s, (lk, &dk)| s + lk[i] * lk[j].conjugate().scale(dk))
+                            .fold(T::default(), |s, (lk, &dk)| {
+                                s + lk[i] * lk[j].conjugate().scale(dk)
+                            })
                     })
                     .collect()
             })

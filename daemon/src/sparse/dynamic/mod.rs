@@ -21,7 +21,7 @@ mod update;
 
 pub use factor::DynamicLdlt;
 pub use solve::IncrementalCholesky;
-pub use update::UpdateError;
+pub use update::{UpdateError, MAX_RANK};
 
 #[cfg(test)]
 mod tests;

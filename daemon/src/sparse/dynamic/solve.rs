@@ -111,8 +111,13 @@ impl<M: Scalar, V: Scalar + Mul<M, Output = V>> IncrementalCholesky<M, V> {
 
     /// `A ← A + σ w wᴴ`. On error the factor must be rebuilt.
     pub fn rank1(&mut self, w: &[(usize, M)], sigma: f64) -> Result<(), UpdateError> {
+        self.rank_k(&[w], sigma)
+    }
+
+    /// `A ← A + σ Σ_t w_t w_tᴴ` (at most `MAX_RANK` vectors) in one walk.
+    pub fn rank_k(&mut self, ws: &[&[(usize, M)]], sigma: f64) -> Result<(), UpdateError> {
         let (dirty, dirty_list, c, y) = (&mut self.dirty, &mut self.dirty_list, &mut self.c, &self.y);
-        self.factor.rank1_with(w, sigma, |j, f| {
+        self.factor.rank_k_with(ws, sigma, |j, f| {
             if !dirty[j] {
                 dirty[j] = true;
                 dirty_list.push(j);

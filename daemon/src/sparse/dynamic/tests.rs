@@ -227,6 +227,39 @@ fn downdate_to_an_indefinite_matrix_is_refused() {
 }
 
 #[test]
+fn appended_block_fills_through_zero_pivots() {
+    // Three new variables receive three rank-1 updates, as a new keyframe
+    // does from its first edge: zero pivots are expected on the way.
+    let (a, _) = start::<f64>(2, &[]);
+    let mut chol =
+        IncrementalCholesky::<f64, f64>::new(DynamicLdlt::from_matrix(&a, &[0, 1]).unwrap(), vec![0.0; 2]);
+    for _ in 0..3 {
+        chol.append();
+    }
+    let rows = [[0.5, 1.0, 2.0, 0.0], [0.0, 0.0, 1.0, 3.0], [1.0, 1.0, 0.0, 1.0]];
+    for r in rows {
+        let w: Vec<(usize, f64)> = vec![(1, r[0]), (2, r[1]), (3, r[2]), (4, r[3])];
+        chol.rank1(&w, 1.0).unwrap();
+    }
+    chol.add_rhs(4, 1.0);
+    chol.solve(0.0);
+    let mut dense = DMatrix::<f64>::identity(5, 5);
+    dense[(2, 2)] = 0.0;
+    dense[(3, 3)] = 0.0;
+    dense[(4, 4)] = 0.0;
+    for r in rows {
+        let v = nalgebra::DVector::from_vec(vec![0.0, r[0], r[1], r[2], r[3]]);
+        dense += &v * v.transpose();
+    }
+    let mut rhs = nalgebra::DVector::zeros(5);
+    rhs[4] = 1.0;
+    let want = dense.cholesky().unwrap().solve(&rhs);
+    for (g, w) in chol.x().iter().zip(want.iter()) {
+        assert!((g - w).abs() < 1e-12, "{g} vs {w}");
+    }
+}
+
+#[test]
 fn update_walks_only_the_elimination_path() {
     // A chain 0-1-2-3-4 plus an isolated 5: updating (3, 4) must not touch
     // columns 0..3 or 5.

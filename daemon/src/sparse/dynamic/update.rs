@@ -1,20 +1,31 @@
-//! Rank-1 update and downdate: `A ← A + σ w wᴴ`, σ = ±1.
+//! Rank-k update and downdate: `A ← A + σ Σ_t w_t w_tᴴ`, σ = ±1, k ≤ 4.
 //!
 //! Davis and Hager's method C1 on `L D Lᴴ`: walking the elimination-tree
-//! path from the first nonzero of `w`, column `j` with `p = w_j` becomes
+//! path from the first nonzero of the `w_t`, column `j` takes each vector in
+//! turn; with `p = w_t[j]` and a running scale `α_t` (starting at σ):
 //!
 //! ```text
-//! d̄_j = d_j + σ|p|²,   γ = σ p̄ / d̄_j,   σ ← σ d_j / d̄_j,
-//! w_i ← w_i − p L_ij,   L_ij ← L_ij + γ w_i    (i below j)
+//! d̄_j = d_j + α_t|p|²,   γ = α_t p̄ / d̄_j,   α_t ← α_t d_j / d̄_j,
+//! w_t[i] ← w_t[i] − p L_ij,   L_ij ← L_ij + γ w_t[i]    (i below j)
 //! ```
 //!
-//! and the pattern of column `j` grows to include every row where `w` is
-//! nonzero, so the walk follows the path of the *new* tree. Only columns on
-//! that path are touched.
+//! Taking all vectors at each column (their multiple-rank form) walks the
+//! path once. The pattern of a column grows to every row where some `w_t`
+//! is nonzero, so the walk follows the path of the *new* tree; only columns
+//! on that path are touched. Each column's pattern nests in its parent's
+//! (the structure of a Cholesky factor), so once a column on the walk gains
+//! no rows, no column above it can: from there the walk just follows parents.
+//!
+//! A zero pivot (a variable with no weight yet, as a keyframe has between
+//! its appending and its first edge) takes a whole vector: its `α_t`
+//! becomes 0 and the rest of the walk does nothing for it.
 
 use super::factor::DynamicLdlt;
 use crate::sparse::Scalar;
 use std::fmt;
+
+/// Most vectors one call takes.
+pub const MAX_RANK: usize = 4;
 
 /// A downdate that would leave the matrix not positive definite.
 #[derive(Clone, Debug, PartialEq)]
@@ -32,69 +43,135 @@ impl fmt::Display for UpdateError {
 impl std::error::Error for UpdateError {}
 
 impl<T: Scalar> DynamicLdlt<T> {
-    /// `A ← A + σ w wᴴ` for a sparse `w` given as distinct `(column, value)`
-    /// pairs. `before(j, self)` runs just before column `j` changes, so a
-    /// caller can retire state that depends on the old column.
+    /// `A ← A + σ Σ_t w_t w_tᴴ` for up to [`MAX_RANK`] sparse vectors, each
+    /// given as distinct `(column, value)` pairs. `before(j, self)` runs
+    /// just before column `j` changes, so a caller can retire state that
+    /// depends on the old column.
     ///
     /// On error (a downdate that loses positive definiteness) the factor is
     /// left inconsistent and must be rebuilt.
-    pub fn rank1_with(
+    pub fn rank_k_with(
         &mut self,
-        w: &[(usize, T)],
+        ws: &[&[(usize, T)]],
         sigma: f64,
         mut before: impl FnMut(usize, &Self),
     ) -> Result<(), UpdateError> {
+        let k = ws.len();
+        assert!(k <= MAX_RANK, "rank {k} above {MAX_RANK}");
         let mut carry = std::mem::take(&mut self.carry);
         carry.clear();
-        for &(i, v) in w {
-            if v != T::default() {
-                self.work[i] += v;
-                carry.push(i as u32);
+        for (t, w) in ws.iter().enumerate() {
+            for &(i, v) in w.iter() {
+                if v != T::default() {
+                    self.work[i * MAX_RANK + t] += v;
+                    carry.push(i as u32);
+                }
             }
         }
         carry.sort_unstable();
         carry.dedup();
-        let mut alpha = sigma;
+        let mut alpha = [sigma; MAX_RANK];
         let mut result = Ok(());
         let mut next = carry.first().map(|&j| j as usize);
-        let mut start = 1;
+        // rows the previous column gained in this walk: by the nesting of
+        // patterns, the only ones its parent can be missing
+        let mut added = std::mem::take(&mut self.added);
+        added.clear();
+        let mut full_merge = true;
         while let Some(j) = next {
             before(j, self);
             let old_parent = self.parent(j);
-            self.merge_pattern(j, &carry[start..]);
-            self.reparent(j, old_parent);
-
-            let p = self.work[j];
-            self.work[j] = T::default();
-            let col = &mut self.cols[j];
-            if p != T::default() {
-                let d = self.d[j];
-                let dbar = d + alpha * p.abs2();
-                if dbar.is_nan() || dbar <= 0.0 || (sigma < 0.0 && dbar <= 1e-14 * d) {
-                    result = Err(UpdateError { column: j });
-                    // clear the accumulator before bailing out
-                    for &r in &col.rows {
-                        self.work[r as usize] = T::default();
-                    }
-                    break;
-                }
-                let gamma = p.conjugate().scale(alpha / dbar);
-                alpha *= d / dbar;
-                self.d[j] = dbar;
-                for (&r, l) in col.rows.iter().zip(col.vals.iter_mut()) {
-                    let wi = &mut self.work[r as usize];
-                    *wi -= p * *l;
-                    *l += gamma * *wi;
-                }
+            if full_merge {
+                let extra = if carry.is_empty() { &[][..] } else { &carry[1..] };
+                self.merge_rows(j, extra, &mut added);
+            } else if !added.is_empty() {
+                // rows of column j are below j; the gained rows start at j
+                let gained = std::mem::take(&mut added);
+                let from = gained.partition_point(|&r| r as usize <= j);
+                self.merge_rows(j, &gained[from..], &mut added);
             }
-            // the nonzeros of w now sit exactly on the new pattern of column j
-            carry.clear();
-            carry.extend_from_slice(&self.cols[j].rows);
-            start = 1;
-            next = carry.first().map(|&r| r as usize);
+            let new_parent = self.parent(j);
+            if new_parent != old_parent {
+                self.reparent(j, old_parent);
+            }
+            if let Err(e) = self.eliminate(j, k, &mut alpha, sigma) {
+                result = Err(e);
+                break;
+            }
+            // a new parent did not nest this column's old rows: merge in full
+            full_merge = new_parent != old_parent && old_parent.is_some();
+            if full_merge {
+                carry.clear();
+                carry.extend_from_slice(&self.cols[j].rows);
+            }
+            next = new_parent;
         }
         self.carry = carry;
+        self.added = added;
         result
+    }
+
+    /// The numeric step of all vectors at column `j`: the pivots first, then
+    /// one sweep over the column applying every vector in turn per row.
+    fn eliminate(
+        &mut self,
+        j: usize,
+        k: usize,
+        alpha: &mut [f64; MAX_RANK],
+        sigma: f64,
+    ) -> Result<(), UpdateError> {
+        let mut ps = [T::default(); MAX_RANK];
+        let mut gammas = [T::default(); MAX_RANK];
+        let mut live = 0;
+        for (t, a) in alpha.iter_mut().enumerate().take(k) {
+            let p = std::mem::take(&mut self.work[j * MAX_RANK + t]);
+            if p == T::default() || *a == 0.0 {
+                continue;
+            }
+            let d = self.d[j];
+            let dbar = d + *a * p.abs2();
+            if dbar.is_nan() || dbar <= 0.0 || (sigma < 0.0 && dbar <= 1e-14 * d) {
+                // leave the accumulator clean before bailing out
+                for r in &self.cols[j].rows {
+                    self.work[*r as usize * MAX_RANK..][..MAX_RANK].fill(T::default());
+                }
+                self.work[j * MAX_RANK..][..MAX_RANK].fill(T::default());
+                return Err(UpdateError { column: j });
+            }
+            gammas[live] = p.conjugate().scale(*a / dbar);
+            ps[live] = p;
+            *a *= d / dbar;
+            self.d[j] = dbar;
+            // remember which vector slot this pivot belongs to
+            self.slots[live] = t as u8;
+            live += 1;
+        }
+        if live == 0 {
+            return Ok(());
+        }
+        let col = &mut self.cols[j];
+        let slots = &self.slots[..live];
+        for (&r, l) in col.rows.iter().zip(col.vals.iter_mut()) {
+            let w = &mut self.work[r as usize * MAX_RANK..][..MAX_RANK];
+            let mut lv = *l;
+            for (i, &t) in slots.iter().enumerate() {
+                let wi = w[t as usize] - ps[i] * lv;
+                w[t as usize] = wi;
+                lv += gammas[i] * wi;
+            }
+            *l = lv;
+        }
+        Ok(())
+    }
+
+    /// `A ← A + σ w wᴴ`.
+    pub fn rank1_with(
+        &mut self,
+        w: &[(usize, T)],
+        sigma: f64,
+        before: impl FnMut(usize, &Self),
+    ) -> Result<(), UpdateError> {
+        self.rank_k_with(&[w], sigma, before)
     }
 
     /// `A ← A + w wᴴ`.
@@ -109,10 +186,17 @@ impl<T: Scalar> DynamicLdlt<T> {
     }
 
     /// Grows the pattern of column `j` to `rows(j) ∪ extra` (both sorted),
-    /// inserting zeros where new.
-    fn merge_pattern(&mut self, j: usize, extra: &[u32]) {
+    /// inserting zeros where new, and records the rows it added in `added`.
+    fn merge_rows(&mut self, j: usize, extra: &[u32], added: &mut Vec<u32>) {
+        added.clear();
         let col = &mut self.cols[j];
-        if extra.iter().all(|r| col.rows.binary_search(r).is_ok()) {
+        let last = col.rows.last().copied();
+        // the common case: the new rows are the newest variables, past the end
+        let tail = extra.partition_point(|&r| last.is_some_and(|l| r <= l));
+        if is_subset(&extra[..tail], &col.rows) {
+            col.rows.extend_from_slice(&extra[tail..]);
+            col.vals.resize(col.rows.len(), T::default());
+            added.extend_from_slice(&extra[tail..]);
             return;
         }
         let (rows, vals) = (&mut self.scratch_rows, &mut self.scratch_vals);
@@ -131,10 +215,33 @@ impl<T: Scalar> DynamicLdlt<T> {
             } else {
                 rows.push(extra[b]);
                 vals.push(T::default());
+                added.push(extra[b]);
                 b += 1;
             }
         }
         std::mem::swap(&mut col.rows, rows);
         std::mem::swap(&mut col.vals, vals);
     }
+}
+
+/// Whether sorted `a` ⊆ sorted `b`: by binary search when `a` is small,
+/// else in one pass.
+fn is_subset(a: &[u32], b: &[u32]) -> bool {
+    if a.len() > b.len() {
+        return false;
+    }
+    if a.len() * 8 < b.len() {
+        return a.iter().all(|x| b.binary_search(x).is_ok());
+    }
+    let mut k = 0;
+    for &x in a {
+        while k < b.len() && b[k] < x {
+            k += 1;
+        }
+        if k == b.len() || b[k] != x {
+            return false;
+        }
+        k += 1;
+    }
+    true
 }
