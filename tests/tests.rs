@@ -3,3 +3,4 @@
 mod accuracy;
 mod cli;
 mod formulations;
+mod incremental;

@@ -17,6 +17,10 @@
 //!
 //! [`synthetic`] generates a seeded world with known ground truth.
 //!
+//! **The engine** ([`engine`]) bridges the two: it keeps the normal
+//! equations factorised as keyframes and edges stream in, and re-solves in
+//! the background.
+//!
 //! **The plumbing**: [`io`] reads and writes graph files.
 //!
 //! ```
@@ -42,6 +46,7 @@
 #![deny(missing_docs)]
 #![warn(clippy::unwrap_used)]
 
+pub mod engine;
 pub mod eval;
 pub mod geometry;
 pub mod graph;

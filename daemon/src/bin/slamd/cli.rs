@@ -18,6 +18,8 @@ pub enum Command {
     Demo(crate::demo::DemoOpts),
     /// Write the built-in synthetic world as a g2o file plus ground truth.
     Synth(crate::synth::SynthOpts),
+    /// Stream a graph file in time order and report per-keyframe latency.
+    Replay(crate::replay::ReplayOpts),
     /// Score a pose table on a graph: χ² and ATE, as `solve` computes them.
     Eval(crate::eval::EvalOpts),
 }

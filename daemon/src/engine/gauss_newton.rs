@@ -1,0 +1,207 @@
+//! [`GaussNewton`]: the normal equations of the SE(2) cost linearised at a
+//! fixed point, kept factorised as edges arrive (iSAM's scheme).
+//!
+//! Between re-solves every edge is linearised at `lin`, the poses of the
+//! last polish (a new keyframe: where its first edge puts it). The system
+//! `H δ = −g` with `H = Σ s Jᵀ Ω J`, `g = Σ s Jᵀ Ω e` then grows by a rank-3
+//! update per edge (`Ω = L Lᵀ`, one update per row of `Lᵀ J`), and the
+//! estimate is `lin + δ`: one Gauss–Newton step from the polished map over
+//! everything seen since. A re-solve relinearises by building a new one.
+
+use crate::geometry::Pose2;
+use crate::graph::{Edge, PoseGraph};
+use crate::nonlinear::structure::{jacobian, HessianStructure, NONE};
+use crate::sparse::dynamic::{DynamicLdlt, IncrementalCholesky, UpdateError};
+use crate::sparse::FactorError;
+
+/// The linearised system and the estimate it gives.
+#[derive(Clone, Debug)]
+pub struct GaussNewton {
+    /// First of the three columns of each keyframe, or `NONE`.
+    column: Vec<u32>,
+    /// The keyframe owning each column.
+    keyframe_of: Vec<u32>,
+    chol: IncrementalCholesky<f64, f64>,
+    lin: Vec<Pose2>,
+    estimate: Vec<Pose2>,
+    /// `Σ s eᵀ Ω e` at `lin`: the cost the linear model starts from.
+    lin_chi2: f64,
+    changed: Vec<usize>,
+    stamp: Vec<u32>,
+    epoch: u32,
+}
+
+impl GaussNewton {
+    /// A system holding only the gauge keyframe at `gauge`.
+    pub fn new(gauge: Pose2) -> Self {
+        Self {
+            column: vec![NONE],
+            keyframe_of: Vec::new(),
+            chol: IncrementalCholesky::empty(),
+            lin: vec![gauge],
+            estimate: vec![gauge],
+            lin_chi2: 0.0,
+            changed: Vec::new(),
+            stamp: vec![0],
+            epoch: 0,
+        }
+    }
+
+    /// A fresh factorisation at `lin` (one pose per keyframe of `graph`):
+    /// keyframes `order` (gauge excluded) in elimination order, `edges` with
+    /// their scales.
+    pub fn build(
+        graph: &PoseGraph,
+        edges: &[(usize, f64)],
+        lin: Vec<Pose2>,
+        order: &[usize],
+    ) -> Result<Self, FactorError> {
+        let n = graph.len();
+        let mut block_of = vec![NONE; n];
+        for (b, &k) in order.iter().enumerate() {
+            block_of[k] = b as u32;
+        }
+        let scaled: Vec<Edge> = edges
+            .iter()
+            .map(|&(e, s)| {
+                let mut edge = graph.edges()[e];
+                edge.information = edge.information.scaled(s);
+                edge
+            })
+            .collect();
+        let structure = HessianStructure::new(block_of.clone(), order.len(), &scaled);
+        let mut h = structure.pattern().clone();
+        let mut g = vec![0.0; structure.dim()];
+        structure.assemble(&scaled, &lin, &mut h, &mut g);
+        let identity: Vec<usize> = (0..h.n()).collect();
+        let factor = DynamicLdlt::from_matrix(&h, &identity)?;
+        let chol = IncrementalCholesky::new(factor, g.iter().map(|v| -v).collect());
+        let column = block_of
+            .iter()
+            .map(|&b| if b == NONE { NONE } else { 3 * b })
+            .collect();
+        let keyframe_of = order.iter().flat_map(|&k| [k as u32; 3]).collect();
+        let lin_chi2 = crate::graph::chi2_of_edges(&scaled, &lin);
+        let mut gn = Self {
+            column,
+            keyframe_of,
+            chol,
+            estimate: lin.clone(),
+            lin,
+            lin_chi2,
+            changed: Vec::new(),
+            stamp: vec![0; n],
+            epoch: 0,
+        };
+        for k in order {
+            gn.refresh_estimate(*k);
+        }
+        Ok(gn)
+    }
+
+    /// Keyframe `k` joins at `guess`. Keyframes that have not joined keep
+    /// their slot with no columns.
+    pub fn add_keyframe(&mut self, k: usize, guess: Pose2) {
+        if self.column.len() <= k {
+            self.column.resize(k + 1, NONE);
+            self.lin.resize(k + 1, Pose2::IDENTITY);
+            self.estimate.resize(k + 1, Pose2::IDENTITY);
+            self.stamp.resize(k + 1, 0);
+        }
+        self.lin[k] = guess;
+        self.estimate[k] = guess;
+        if k == 0 {
+            return;
+        }
+        let c = self.chol.append();
+        self.chol.append();
+        self.chol.append();
+        self.column[k] = c as u32;
+        self.keyframe_of.extend([k as u32; 3]);
+    }
+
+    /// Adds `delta` times the edge's terms, linearised at `lin`.
+    pub fn apply_edge(&mut self, edge: &Edge, delta: f64) -> Result<(), UpdateError> {
+        let (j, e) = jacobian(edge, &self.lin[edge.from], &self.lin[edge.to]);
+        let omega = edge.information.matrix();
+        self.lin_chi2 += delta * (e.transpose() * omega * e)[0];
+        // b = −g: −Δ Jᵀ Ω e
+        let g = (omega * j).transpose() * e;
+        let cols: [Option<usize>; 6] = std::array::from_fn(|a| {
+            let k = if a < 3 { edge.from } else { edge.to };
+            let c = self.column[k];
+            (c != NONE).then(|| c as usize + a % 3)
+        });
+        for (a, c) in cols.iter().enumerate() {
+            if let Some(c) = c {
+                self.chol.add_rhs(*c, -delta * g[a]);
+            }
+        }
+        // Ω = L Lᵀ, so Jᵀ Ω J = Σ_r (Lᵀ J)_rᵀ (Lᵀ J)_r
+        let l = omega
+            .cholesky()
+            .map(|c| c.l())
+            .unwrap_or_else(|| omega.map(|v| v.max(0.0).sqrt()));
+        let rows = l.transpose() * j;
+        let root = delta.abs().sqrt();
+        let w: [Vec<(usize, f64)>; 3] = std::array::from_fn(|r| {
+            cols.iter()
+                .enumerate()
+                .filter_map(|(a, c)| c.map(|c| (c, rows[(r, a)] * root)))
+                .collect()
+        });
+        self.chol.rank_k(&[&w[0], &w[1], &w[2]], delta.signum())
+    }
+
+    /// Solves for δ; columns whose change stays within `threshold` do not
+    /// pass it to their subtrees. Returns the keyframes whose estimate moved.
+    pub fn solve(&mut self, threshold: f64) -> &[usize] {
+        self.epoch = self.epoch.wrapping_add(1);
+        self.changed.clear();
+        let changed_cols = self.chol.solve(threshold).to_vec();
+        for c in changed_cols {
+            let k = self.keyframe_of[c] as usize;
+            if self.stamp[k] != self.epoch {
+                self.stamp[k] = self.epoch;
+                self.changed.push(k);
+            }
+        }
+        for i in 0..self.changed.len() {
+            self.refresh_estimate(self.changed[i]);
+        }
+        &self.changed
+    }
+
+    fn refresh_estimate(&mut self, k: usize) {
+        let c = self.column[k];
+        if c == NONE {
+            return;
+        }
+        let x = &self.chol.x()[c as usize..c as usize + 3];
+        let l = self.lin[k];
+        self.estimate[k] = Pose2::new(l.x + x[0], l.y + x[1], l.theta + x[2]);
+    }
+
+    /// The χ² the linear model predicts at its solution:
+    /// `χ²(lin) + 2gᵀδ + δᵀHδ = χ²(lin) − bᵀδ` (with `Hδ = b = −g`). Far
+    /// below the true χ² of the estimate means the linearisation failed.
+    pub fn predicted_chi2(&self) -> f64 {
+        let bx: f64 = self.chol.b().iter().zip(self.chol.x()).map(|(b, x)| b * x).sum();
+        self.lin_chi2 - bx
+    }
+
+    /// The current estimate of every keyframe slot.
+    pub fn estimate(&self) -> &[Pose2] {
+        &self.estimate
+    }
+
+    /// The factor.
+    pub fn factor(&self) -> &crate::sparse::dynamic::DynamicLdlt<f64> {
+        self.chol.factor()
+    }
+
+    /// Stored entries of the factor.
+    pub fn factor_nnz(&self) -> usize {
+        self.chol.factor().nnz()
+    }
+}

@@ -1,0 +1,522 @@
+//! The incremental engine: keyframes and edges in, a fresh estimate out
+//! after every update.
+//!
+//! [`Engine`] keeps two incremental systems over the keyframes seen so far:
+//!
+//! - the Gauss–Newton normal equations linearised at the last polished map
+//!   ([`gauss_newton`]): its solution is the published estimate, one
+//!   Gauss–Newton step from the polish over every edge since;
+//! - optionally, the two-stage linear system ([`linear_stages`]), exact at
+//!   every step.
+//!
+//! Both live in [`DynamicLdlt`](crate::sparse::dynamic::DynamicLdlt)
+//! factors: a new keyframe appends columns, a new edge or a reweight is a
+//! low-rank update. Every `resolve_every_edges` edges, or when the factor
+//! has filled in past `resolve_fill_ratio`, a re-solve ([`resolve`]) runs
+//! on another thread: Levenberg–Marquardt polish, a fresh ordering with the
+//! newest keyframes last, a refactorisation; it then replays what arrived
+//! meanwhile and swaps in without stopping ingestion.
+//!
+//! ```
+//! use slamd::engine::{EdgeInput, Engine, EngineConfig};
+//! use slamd::geometry::Pose2;
+//! use slamd::graph::{EdgeKind, Information};
+//!
+//! let mut engine = Engine::new(EngineConfig::default());
+//! let step = Pose2::new(1.0, 0.0, std::f64::consts::FRAC_PI_2);
+//! for id in 0..4u64 {
+//!     engine.add_keyframe(id, None).unwrap();
+//!     if id > 0 {
+//!         let edge = EdgeInput::new(id - 1, id, step, Information::identity(), EdgeKind::Odometry);
+//!         engine.add_edge(edge).unwrap();
+//!     }
+//!     engine.update();
+//! }
+//! // close the square
+//! engine.add_edge(EdgeInput::new(3, 0, step, Information::identity(), EdgeKind::LoopClosure)).unwrap();
+//! let report = engine.update();
+//! let snap = engine.snapshot();
+//! assert_eq!(snap.version, report.version);
+//! assert_eq!(snap.len(), 4);
+//! assert!(snap.chi2 < 1e-12);
+//! let p2 = snap.pose(2).unwrap();
+//! assert!((p2.x - 1.0).abs() < 1e-9 && (p2.y - 1.0).abs() < 1e-9);
+//! ```
+
+pub mod gauss_newton;
+pub mod linear_stages;
+mod resolve;
+mod snapshot;
+mod state;
+
+pub use snapshot::Snapshot;
+pub use state::{Op, SnapshotSource};
+
+use crate::geometry::Pose2;
+use crate::graph::{EdgeKind, GraphError, Information, KeyframeId};
+use crate::nonlinear::LevenbergMarquardtParams;
+use crate::sparse::dynamic::UpdateError;
+use resolve::Job;
+use state::State;
+use std::fmt;
+
+/// An edge as a frontend gives it: keyframe ids, `T_ij`, Ω and its kind.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct EdgeInput {
+    /// Keyframe `i`.
+    pub from: KeyframeId,
+    /// Keyframe `j`.
+    pub to: KeyframeId,
+    /// `T_ij`: `j` seen from `i`.
+    pub measurement: Pose2,
+    /// Ω over `(x, y, θ)`.
+    pub information: Information,
+    /// What produced it.
+    pub kind: EdgeKind,
+}
+
+impl EdgeInput {
+    /// Bundles the fields.
+    pub fn new(
+        from: KeyframeId,
+        to: KeyframeId,
+        measurement: Pose2,
+        information: Information,
+        kind: EdgeKind,
+    ) -> Self {
+        Self {
+            from,
+            to,
+            measurement,
+            information,
+            kind,
+        }
+    }
+}
+
+/// Why the engine refused a change. A refused change is not stored.
+#[derive(Clone, Debug, PartialEq)]
+#[non_exhaustive]
+pub enum EngineError {
+    /// The graph refused it (duplicate or unknown id, self-edge, NaN).
+    Graph(GraphError),
+    /// No edge has this index.
+    UnknownEdge(usize),
+    /// A weight that is negative or not finite.
+    InvalidWeight(f64),
+    /// Odometry edges are never switched off.
+    OdometrySwitch(usize),
+    /// A downdate lost positive definiteness; the engine refactorised.
+    Numeric(UpdateError),
+}
+
+impl fmt::Display for EngineError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            EngineError::Graph(e) => e.fmt(f),
+            EngineError::UnknownEdge(e) => write!(f, "no edge with index {e}"),
+            EngineError::InvalidWeight(w) => write!(f, "edge weight {w} is not a finite number ≥ 0"),
+            EngineError::OdometrySwitch(e) => write!(f, "edge {e} is odometry and cannot be switched off"),
+            EngineError::Numeric(e) => write!(f, "{e}; refactorised"),
+        }
+    }
+}
+
+impl std::error::Error for EngineError {}
+
+impl From<GraphError> for EngineError {
+    fn from(e: GraphError) -> Self {
+        EngineError::Graph(e)
+    }
+}
+
+/// Tuning of the [`Engine`]. The defaults are what the replay benchmarks
+/// measured best on City10000 and Manhattan.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default)]
+pub struct EngineConfig {
+    /// Re-solve after this many new edges (0: never on count).
+    pub resolve_every_edges: usize,
+    /// Re-solve when the factor holds this many times the entries it had
+    /// after the last re-solve (0: never on fill).
+    pub resolve_fill_ratio: f64,
+    /// Run re-solves on a background thread; else inline, blocking.
+    pub background: bool,
+    /// A column whose solution moves by at most this much does not pass the
+    /// change to its subtree (iSAM2's wildfire; m and rad). 0 is exact.
+    pub wildfire_threshold: f64,
+    /// Re-solve at once, inline, when the estimate's true χ² exceeds this
+    /// multiple of the χ² its linear model predicts (plus 1): the
+    /// linearisation point is too far from the estimate, as after a large
+    /// loop closure (0: never).
+    pub nonlinear_ratio: f64,
+    /// Defer a loop closure's Gauss–Newton update to the next
+    /// refactorisation when its χ² at the current estimate is at most this
+    /// (0: never). It still counts in the published χ² at its residual.
+    pub defer_chi2: f64,
+    /// Apply every deferred edge at once when their χ² exceeds this
+    /// fraction of the estimate's χ².
+    pub defer_budget: f64,
+    /// Keyframes kept last in a fresh ordering.
+    pub recent_last: usize,
+    /// What the published estimate is between re-solves.
+    pub snapshot: SnapshotSource,
+    /// Keep the exact two-stage linear solution even when it is not the
+    /// snapshot source.
+    pub linear_stages: bool,
+    /// The polish of each re-solve.
+    pub polish: LevenbergMarquardtParams,
+}
+
+impl Default for EngineConfig {
+    fn default() -> Self {
+        Self {
+            resolve_every_edges: 1000,
+            resolve_fill_ratio: 2.0,
+            background: true,
+            wildfire_threshold: 1e-4,
+            nonlinear_ratio: 1.5,
+            defer_chi2: 0.0,
+            defer_budget: 0.05,
+            recent_last: 32,
+            snapshot: SnapshotSource::default(),
+            linear_stages: false,
+            polish: LevenbergMarquardtParams::default(),
+        }
+    }
+}
+
+/// What an [`Engine::update`] did.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct UpdateReport {
+    /// The snapshot version it produced.
+    pub version: u64,
+    /// Keyframes whose estimate moved.
+    pub moved: usize,
+    /// χ² of the new estimate.
+    pub chi2: f64,
+    /// True when a finished re-solve was swapped in.
+    pub resolved: bool,
+}
+
+/// Counters of the engine's work.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct EngineStats {
+    /// Re-solves swapped in.
+    pub resolves: usize,
+    /// Seconds spent in re-solves (on their thread).
+    pub resolve_seconds: f64,
+    /// Refactorisations forced by a failed downdate.
+    pub recoveries: usize,
+    /// Inline re-solves forced by the nonlinearity check.
+    pub nonlinear_resolves: usize,
+    /// Entries of the Gauss–Newton factor now.
+    pub factor_nnz: usize,
+}
+
+/// The incremental pose-graph solver.
+pub struct Engine {
+    state: State,
+    config: EngineConfig,
+    job: Option<Job>,
+    log: Vec<(u64, Op)>,
+    seq: u64,
+    edges_since_resolve: usize,
+    nnz_after_resolve: usize,
+    version: u64,
+    stats: EngineStats,
+}
+
+impl Engine {
+    /// An empty engine.
+    pub fn new(config: EngineConfig) -> Self {
+        let mut state = State::new(config.snapshot, config.linear_stages);
+        state.set_deferral(config.defer_chi2);
+        Self {
+            state,
+            config,
+            job: None,
+            log: Vec::new(),
+            seq: 0,
+            edges_since_resolve: 0,
+            nnz_after_resolve: 0,
+            version: 0,
+            stats: EngineStats::default(),
+        }
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &EngineConfig {
+        &self.config
+    }
+
+    /// Adds a keyframe; the first one is the gauge. `guess` is a pose in
+    /// the map frame; without one, the keyframe's first edge to the map
+    /// places it. Returns its index.
+    pub fn add_keyframe(&mut self, id: KeyframeId, guess: Option<Pose2>) -> Result<usize, EngineError> {
+        self.submit(Op::Keyframe { id, guess })?;
+        Ok(self.state.model.graph.len() - 1)
+    }
+
+    /// Adds an edge between two known keyframes and returns its index. It
+    /// joins the estimate when it links to the gauge's part of the graph.
+    pub fn add_edge(&mut self, edge: EdgeInput) -> Result<usize, EngineError> {
+        self.submit(Op::Edge(edge))?;
+        self.edges_since_resolve += 1;
+        Ok(self.state.model.graph.edges().len() - 1)
+    }
+
+    /// Sets an edge's weight (its information is scaled by `scale`; 0
+    /// removes it). Odometry cannot be set to 0.
+    pub fn set_edge_weight(&mut self, edge: usize, scale: f64) -> Result<(), EngineError> {
+        self.state.check_weight(edge, scale)?;
+        self.submit(Op::Weight { edge, scale })
+    }
+
+    /// Removes an edge's terms (weight 0); a later weight restores it.
+    pub fn remove_edge(&mut self, edge: usize) -> Result<(), EngineError> {
+        self.set_edge_weight(edge, 0.0)
+    }
+
+    fn submit(&mut self, op: Op) -> Result<(), EngineError> {
+        match self.state.apply(&op) {
+            Ok(()) => {}
+            Err(EngineError::Numeric(e)) => {
+                // the change is in the model; the factor is not: rebuild it
+                tracing::warn!(error = %e, "Downdate failed; refactorising.");
+                self.stats.recoveries += 1;
+                self.rebuild_inline(false);
+            }
+            Err(e) => return Err(e),
+        }
+        if let Some(job) = &self.job {
+            job.forward(self.seq, op.clone());
+            self.log.push((self.seq, op));
+        }
+        self.seq += 1;
+        Ok(())
+    }
+
+    /// Solves for the new estimate, swaps in a finished re-solve, and
+    /// starts one when due. Returns what changed.
+    pub fn update(&mut self) -> UpdateReport {
+        let mut resolved = self.poll_job();
+        let mut moved = self.solve();
+        let budget = self.config.defer_budget * self.state.chi2();
+        if self.state.deferred_chi2() > 4.0 * budget {
+            // too much left out to wait for a re-solve
+            match self.state.apply_deferred() {
+                Ok(n) => tracing::debug!(edges = n, "Deferred edges applied."),
+                Err(_) => self.rebuild_inline(false),
+            }
+            moved = moved.max(self.solve());
+        } else if self.state.deferred_chi2() > budget && self.job.is_none() {
+            self.start_resolve();
+        }
+        if self.nonlinear() {
+            self.stats.nonlinear_resolves += 1;
+            tracing::debug!(
+                chi2 = self.state.chi2(),
+                "Linearisation failed; re-solving inline."
+            );
+            moved = self.resolve_inline();
+            resolved = true;
+        }
+        self.version += 1;
+        if self.resolve_due() {
+            self.start_resolve();
+        }
+        UpdateReport {
+            version: self.version,
+            moved,
+            chi2: self.state.chi2(),
+            resolved,
+        }
+    }
+
+    /// Starts a re-solve now if none is running (call when idle).
+    pub fn idle(&mut self) {
+        if self.job.is_none() && self.edges_since_resolve > 0 {
+            self.start_resolve();
+        }
+    }
+
+    /// Waits for any running re-solve, then re-solves inline over
+    /// everything: the polished estimate of the whole graph.
+    pub fn resolve_now(&mut self) -> UpdateReport {
+        let moved = self.resolve_inline();
+        self.version += 1;
+        UpdateReport {
+            version: self.version,
+            moved,
+            chi2: self.state.chi2(),
+            resolved: true,
+        }
+    }
+
+    /// The current estimate.
+    pub fn snapshot(&self) -> Snapshot<'_> {
+        let m = &self.state.model;
+        Snapshot {
+            version: self.version,
+            chi2: self.state.chi2(),
+            resolves: self.stats.resolves,
+            keyframes: m.graph.keyframes(),
+            joined: &m.joined,
+            poses: self.state.estimate(),
+        }
+    }
+
+    /// The exact two-stage linear solution of everything so far (needs
+    /// `linear_stages`), indexed like the keyframes.
+    pub fn linear_solution(&mut self) -> Option<Vec<Pose2>> {
+        self.state.linear_solution()
+    }
+
+    /// The graph as the engine holds it (keyframes in arrival order).
+    pub fn graph(&self) -> &crate::graph::PoseGraph {
+        &self.state.model.graph
+    }
+
+    /// Current weight of each edge.
+    pub fn edge_weights(&self) -> &[f64] {
+        &self.state.model.scale
+    }
+
+    /// Work counters.
+    pub fn stats(&self) -> EngineStats {
+        EngineStats {
+            factor_nnz: self.state.factor_nnz(),
+            ..self.stats
+        }
+    }
+
+    fn resolve_inline(&mut self) -> usize {
+        if let Some(job) = self.job.take() {
+            if let Some(outcome) = job.finish() {
+                self.swap_in(outcome);
+            }
+        }
+        self.rebuild_inline(true);
+        self.stats.resolves += 1;
+        self.solve()
+    }
+
+    /// The state's solve; a failed downdate on the way means a rebuild.
+    fn solve(&mut self) -> usize {
+        match self.state.solve(self.config.wildfire_threshold) {
+            Ok(moved) => moved,
+            Err(e) => {
+                tracing::warn!(error = %e, "Update failed; refactorising.");
+                self.stats.recoveries += 1;
+                self.rebuild_inline(false);
+                self.state.solve(self.config.wildfire_threshold).unwrap_or(0)
+            }
+        }
+    }
+
+    /// Whether the estimate's χ² is far above its linear model's.
+    fn nonlinear(&self) -> bool {
+        let ratio = self.config.nonlinear_ratio;
+        match self.state.predicted_chi2() {
+            Some(predicted) => ratio > 0.0 && self.state.chi2() > ratio * predicted.max(0.0) + 1.0,
+            None => false,
+        }
+    }
+
+    fn resolve_due(&self) -> bool {
+        if self.job.is_some() {
+            return false;
+        }
+        let c = &self.config;
+        let by_count = c.resolve_every_edges > 0 && self.edges_since_resolve >= c.resolve_every_edges;
+        let by_fill = c.resolve_fill_ratio > 0.0
+            && self.nnz_after_resolve > 0
+            && self.state.factor_nnz() as f64 > c.resolve_fill_ratio * self.nnz_after_resolve as f64;
+        by_count || by_fill
+    }
+
+    fn start_resolve(&mut self) {
+        self.edges_since_resolve = 0;
+        let model = self.state.model().clone();
+        let estimate = self.state.estimate().to_vec();
+        if self.config.background {
+            self.log.clear();
+            self.job = Some(Job::spawn(model, estimate, self.config.clone()));
+        } else {
+            let (_tx, rx) = crossbeam::channel::unbounded();
+            let outcome = resolve::run(model, &estimate, &self.config, &rx);
+            self.swap_in(outcome);
+        }
+    }
+
+    fn poll_job(&mut self) -> bool {
+        let Some(job) = &mut self.job else {
+            return false;
+        };
+        match job.try_finish() {
+            Some(outcome) => {
+                self.job = None;
+                self.swap_in(outcome)
+            }
+            None => false,
+        }
+    }
+
+    /// Replays what the re-solve missed and makes its state current.
+    fn swap_in(&mut self, outcome: resolve::Outcome) -> bool {
+        let log = std::mem::take(&mut self.log);
+        let Ok(mut state) = outcome.state else {
+            tracing::warn!("Re-solve failed; keeping the current factor.");
+            return false;
+        };
+        for (seq, op) in log {
+            if outcome.last_seq.is_none_or(|last| seq > last) {
+                if let Err(e) = state.apply(&op) {
+                    tracing::warn!(error = %e, seq, ?op, "Re-solve cannot replay an op; discarded.");
+                    return false;
+                }
+            }
+        }
+        self.state = state;
+        self.after_resolve();
+        self.stats.resolves += 1;
+        self.stats.resolve_seconds += outcome.seconds;
+        tracing::debug!(
+            seconds = outcome.seconds,
+            chi2 = self.state.chi2(),
+            "Re-solve swapped in."
+        );
+        true
+    }
+
+    fn rebuild_inline(&mut self, polish: bool) {
+        let c = &self.config;
+        let lm = polish.then_some(&c.polish);
+        let (model, start) = (self.state.model().clone(), self.state.estimate());
+        match State::rebuild(model, start, lm, c.recent_last, c.snapshot, c.linear_stages) {
+            Ok(state) => {
+                self.state = state;
+                self.after_resolve();
+                self.edges_since_resolve = 0;
+            }
+            Err(e) => tracing::error!(error = %e, "Refactorisation failed; the estimate is stale."),
+        }
+    }
+}
+
+impl Engine {
+    /// Records the fresh factor's size and carries the deferral rule over.
+    fn after_resolve(&mut self) {
+        self.nnz_after_resolve = self.state.factor_nnz();
+        self.state.set_deferral(self.config.defer_chi2);
+    }
+}
+
+impl Drop for Engine {
+    fn drop(&mut self) {
+        if let Some(job) = self.job.take() {
+            let _ = job.finish();
+        }
+    }
+}

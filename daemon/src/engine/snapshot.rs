@@ -1,0 +1,42 @@
+//! [`Snapshot`]: the estimate the engine publishes after each update.
+
+use crate::geometry::Pose2;
+use crate::graph::{Keyframe, KeyframeId};
+
+/// A borrowed view of the current estimate: the poses of every keyframe
+/// linked to the gauge, with a version number and the χ² of the estimate.
+#[derive(Clone, Copy, Debug)]
+pub struct Snapshot<'a> {
+    /// Increases by one with every [`update`](super::Engine::update).
+    pub version: u64,
+    /// χ² of the estimate over the applied edges, with their weights.
+    pub chi2: f64,
+    /// Number of completed re-solves so far.
+    pub resolves: usize,
+    pub(super) keyframes: &'a [Keyframe],
+    pub(super) joined: &'a [bool],
+    pub(super) poses: &'a [Pose2],
+}
+
+impl<'a> Snapshot<'a> {
+    /// `(id, pose)` of every keyframe in the estimate, in arrival order.
+    pub fn poses(&self) -> impl Iterator<Item = (KeyframeId, Pose2)> + 'a {
+        let (k, j, p) = (self.keyframes, self.joined, self.poses);
+        (0..k.len()).filter(move |&i| j[i]).map(move |i| (k[i].id, p[i]))
+    }
+
+    /// The pose of one keyframe, if it is in the estimate.
+    pub fn pose(&self, index: usize) -> Option<Pose2> {
+        (index < self.joined.len() && self.joined[index]).then(|| self.poses[index])
+    }
+
+    /// Number of keyframes in the estimate.
+    pub fn len(&self) -> usize {
+        self.joined.iter().filter(|&&j| j).count()
+    }
+
+    /// True when no keyframe is in the estimate.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}
