@@ -1,1 +1,30 @@
+//! slamd's wire protocol over iceoryx2 shared memory.
+//!
+//! Frontends publish [`Keyframe`]s, [`Edge`]s and [`GpsFix`]es, then poke
+//! the daemon with an event; the daemon publishes a [`SnapshotHeader`] plus
+//! a slice of [`Pose`]s after each batch, and a [`Rejection`] for every
+//! message it refuses. All names live under one namespace ([`ServiceNames`]).
+//!
+//! - [`message`]: the `#[repr(C)]` types, identical in every process.
+//! - [`service`]: service names and QoS numbers, in one place.
+//! - [`transport`]: the only code in slamd that touches iceoryx2: the
+//!   daemon's [`Ingress`](transport::Ingress) and
+//!   [`Outlet`](transport::Outlet), the frontend's
+//!   [`FrontendLink`](transport::FrontendLink) and
+//!   [`SnapshotLink`](transport::SnapshotLink).
+//!
+//! A protocol version travels in every message and in every service's
+//! attributes: a frontend built against another layout gets a clear error
+//! at connect (or a rejection), never garbage.
 
+#![deny(missing_docs)]
+
+pub mod message;
+pub mod service;
+pub mod transport;
+
+pub use message::{
+    Edge, EdgeKindWire, FrontendAck, GpsFix, Keyframe, Pose, Rejection, RejectionReason, SnapshotHeader,
+    MAX_FRONTENDS, PROTOCOL_VERSION,
+};
+pub use service::ServiceNames;

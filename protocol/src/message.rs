@@ -1,0 +1,340 @@
+//! The messages, as they sit in shared memory.
+//!
+//! Every type is `#[repr(C)]`, holds only integers, floats and fixed arrays,
+//! and derives iceoryx2's `ZeroCopySend` with an explicit `type_name`: it is
+//! self-contained, holds no pointers and has one layout in every process
+//! (the contract of `iceoryx2-bb/elementary-traits/src/zero_copy_send.rs`).
+//! iceoryx2 matches a service's type by name, size and alignment; the
+//! protocol version in each message and in the services' attributes catches
+//! the rest.
+
+use iceoryx2::prelude::*;
+
+/// The layout version of every message below. Bump it on any change.
+pub const PROTOCOL_VERSION: u32 = 1;
+
+/// Frontends whose progress a snapshot header reports.
+pub const MAX_FRONTENDS: usize = 8;
+
+/// What produced an edge, on the wire.
+#[repr(u32)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum EdgeKindWire {
+    /// Consecutive keyframes.
+    Odometry = 0,
+    /// A place-recognition match.
+    LoopClosure = 1,
+    /// Anything else.
+    Other = 2,
+}
+
+impl EdgeKindWire {
+    /// The kind encoded as `v`, if valid.
+    pub fn from_u32(v: u32) -> Option<Self> {
+        match v {
+            0 => Some(Self::Odometry),
+            1 => Some(Self::LoopClosure),
+            2 => Some(Self::Other),
+            _ => None,
+        }
+    }
+}
+
+/// A new keyframe.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[type_name("slamd::Keyframe")]
+pub struct Keyframe {
+    /// The frontend's id for it.
+    pub id: u64,
+    /// When it was taken (ns, the frontend's clock).
+    pub timestamp_ns: u64,
+    /// Initial pose `(x, y, θ)` in the map frame, valid if `has_guess != 0`.
+    pub guess: [f64; 3],
+    /// 1 when `guess` is set.
+    pub has_guess: u32,
+    /// The sending frontend.
+    pub frontend: u32,
+    /// The frontend's running message number.
+    pub sequence: u64,
+    /// [`PROTOCOL_VERSION`] of the sender.
+    pub protocol: u32,
+    /// Zero.
+    pub reserved: u32,
+}
+
+/// A relative-pose measurement `T_ij` with its information matrix.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[type_name("slamd::Edge")]
+pub struct Edge {
+    /// Keyframe `i`.
+    pub from: u64,
+    /// Keyframe `j`.
+    pub to: u64,
+    /// `T_ij` translation x (m).
+    pub dx: f64,
+    /// `T_ij` translation y (m).
+    pub dy: f64,
+    /// `T_ij` rotation (rad).
+    pub dtheta: f64,
+    /// Ω's upper triangle in g2o order: xx, xy, xθ, yy, yθ, θθ.
+    pub information: [f64; 6],
+    /// An [`EdgeKindWire`] as `u32`.
+    pub kind: u32,
+    /// The sending frontend.
+    pub frontend: u32,
+    /// The frontend's running message number.
+    pub sequence: u64,
+    /// [`PROTOCOL_VERSION`] of the sender.
+    pub protocol: u32,
+    /// Zero.
+    pub reserved: u32,
+}
+
+/// A GPS fix attached to a keyframe.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[type_name("slamd::GpsFix")]
+pub struct GpsFix {
+    /// The keyframe it belongs to.
+    pub keyframe: u64,
+    /// WGS84 latitude (degrees).
+    pub latitude: f64,
+    /// WGS84 longitude (degrees).
+    pub longitude: f64,
+    /// Height above the ellipsoid (m), valid if `has_altitude != 0`.
+    pub altitude: f64,
+    /// Covariance of (east, north) in m², row-major 2×2.
+    pub covariance: [f64; 4],
+    /// 1 when `altitude` is set.
+    pub has_altitude: u32,
+    /// The sending frontend.
+    pub frontend: u32,
+    /// The frontend's running message number.
+    pub sequence: u64,
+    /// [`PROTOCOL_VERSION`] of the sender.
+    pub protocol: u32,
+    /// Zero.
+    pub reserved: u32,
+}
+
+/// One pose of a snapshot.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
+#[type_name("slamd::Pose")]
+pub struct Pose {
+    /// Keyframe id.
+    pub id: u64,
+    /// Map-frame x (m).
+    pub x: f64,
+    /// Map-frame y (m).
+    pub y: f64,
+    /// Map-frame heading (rad).
+    pub theta: f64,
+}
+
+/// How far the daemon has got with one frontend's messages.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
+#[type_name("slamd::FrontendAck")]
+pub struct FrontendAck {
+    /// The frontend (0: unused slot).
+    pub frontend: u32,
+    /// Zero.
+    pub reserved: u32,
+    /// Its highest message number the snapshot has taken in (applied,
+    /// held for a missing keyframe, or rejected).
+    pub sequence: u64,
+}
+
+/// The header of a pose snapshot; the payload is `poses` [`Pose`]s.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
+#[type_name("slamd::SnapshotHeader")]
+pub struct SnapshotHeader {
+    /// [`PROTOCOL_VERSION`] of the daemon.
+    pub protocol: u32,
+    /// Zero.
+    pub reserved: u32,
+    /// Increases with every snapshot.
+    pub version: u64,
+    /// Number of poses that follow.
+    pub poses: u64,
+    /// χ² of the estimate.
+    pub chi2: f64,
+    /// When the estimate was solved (ns since the UNIX epoch).
+    pub solved_at_ns: u64,
+    /// Keyframes received so far.
+    pub keyframes: u64,
+    /// Edges received so far.
+    pub edges: u64,
+    /// Messages rejected so far (details on the rejection topic).
+    pub rejected: u64,
+    /// Edges waiting for a keyframe that has not arrived.
+    pub held: u64,
+    /// Re-solves completed.
+    pub resolves: u64,
+    /// Progress of the most recent frontends.
+    pub acks: [FrontendAck; MAX_FRONTENDS],
+}
+
+impl SnapshotHeader {
+    /// The highest message number of `frontend` this snapshot took in.
+    pub fn ack_of(&self, frontend: u32) -> Option<u64> {
+        self.acks
+            .iter()
+            .find(|a| a.frontend == frontend && frontend != 0)
+            .map(|a| a.sequence)
+    }
+}
+
+/// Why a message was refused.
+#[repr(u32)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RejectionReason {
+    /// A NaN or infinite number.
+    NonFinite = 1,
+    /// An information matrix or covariance that is not positive definite.
+    NotPositiveDefinite = 2,
+    /// An edge or fix names a keyframe that never arrived in time.
+    UnknownKeyframe = 3,
+    /// A keyframe id that already exists.
+    DuplicateKeyframe = 4,
+    /// An edge from a keyframe to itself.
+    SelfEdge = 5,
+    /// A message built against another protocol version.
+    ProtocolVersion = 6,
+    /// An edge kind outside [`EdgeKindWire`].
+    BadKind = 7,
+    /// A GPS fix out of range (|lat| > 90, |lon| > 180).
+    OutOfRange = 8,
+    /// Too many edges waiting for keyframes; the oldest was dropped.
+    HeldOverflow = 9,
+    /// Any other refusal; see the text.
+    Other = 10,
+    /// A code this build does not know.
+    Unknown = 0,
+}
+
+impl RejectionReason {
+    /// Decodes a reason, [`Self::Unknown`] for anything new.
+    pub fn from_u32(v: u32) -> Self {
+        match v {
+            1 => Self::NonFinite,
+            2 => Self::NotPositiveDefinite,
+            3 => Self::UnknownKeyframe,
+            4 => Self::DuplicateKeyframe,
+            5 => Self::SelfEdge,
+            6 => Self::ProtocolVersion,
+            7 => Self::BadKind,
+            8 => Self::OutOfRange,
+            9 => Self::HeldOverflow,
+            10 => Self::Other,
+            _ => Self::Unknown,
+        }
+    }
+}
+
+/// Which message a rejection refers to.
+pub mod kind {
+    /// A keyframe.
+    pub const KEYFRAME: u32 = 1;
+    /// An edge.
+    pub const EDGE: u32 = 2;
+    /// A GPS fix.
+    pub const GPS: u32 = 3;
+}
+
+/// A refused message, with the reason in words.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[type_name("slamd::Rejection")]
+pub struct Rejection {
+    /// The frontend that sent it.
+    pub frontend: u32,
+    /// A [`RejectionReason`] as `u32`.
+    pub reason: u32,
+    /// Its message number.
+    pub sequence: u64,
+    /// [`kind`] of message.
+    pub message: u32,
+    /// Zero.
+    pub reserved: u32,
+    /// The ids involved (keyframe; edge ends).
+    pub ids: [u64; 2],
+    /// NUL-padded UTF-8 explanation.
+    pub text: [u8; 120],
+}
+
+impl Rejection {
+    /// Builds a rejection, cutting `text` at a character boundary to fit.
+    pub fn new(
+        frontend: u32,
+        sequence: u64,
+        message: u32,
+        reason: RejectionReason,
+        ids: [u64; 2],
+        text: &str,
+    ) -> Self {
+        let mut buf = [0u8; 120];
+        let mut end = text.len().min(buf.len());
+        while !text.is_char_boundary(end) {
+            end -= 1;
+        }
+        buf[..end].copy_from_slice(&text.as_bytes()[..end]);
+        Self {
+            frontend,
+            reason: reason as u32,
+            sequence,
+            message,
+            reserved: 0,
+            ids,
+            text: buf,
+        }
+    }
+
+    /// The reason.
+    pub fn reason(&self) -> RejectionReason {
+        RejectionReason::from_u32(self.reason)
+    }
+
+    /// The explanation.
+    pub fn text(&self) -> &str {
+        let end = self.text.iter().position(|&b| b == 0).unwrap_or(self.text.len());
+        std::str::from_utf8(&self.text[..end]).unwrap_or("(invalid text)")
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn reasons_round_trip_and_unknown_codes_are_tolerated() {
+        for r in [
+            RejectionReason::NonFinite,
+            RejectionReason::HeldOverflow,
+            RejectionReason::Other,
+        ] {
+            assert_eq!(RejectionReason::from_u32(r as u32), r);
+        }
+        assert_eq!(RejectionReason::from_u32(999), RejectionReason::Unknown);
+        assert_eq!(EdgeKindWire::from_u32(3), None);
+    }
+
+    #[test]
+    fn rejection_text_is_cut_at_a_character_boundary() {
+        let long = "é".repeat(100);
+        let r = Rejection::new(1, 2, kind::EDGE, RejectionReason::Other, [0, 0], &long);
+        assert_eq!(r.text().chars().count(), 60);
+        assert_eq!(r.reason(), RejectionReason::Other);
+    }
+
+    #[test]
+    fn layouts_are_what_the_protocol_says() {
+        assert_eq!(std::mem::size_of::<Edge>(), 112);
+        assert_eq!(std::mem::size_of::<Pose>(), 32);
+        assert_eq!(std::mem::align_of::<SnapshotHeader>(), 8);
+    }
+}

@@ -1,0 +1,118 @@
+//! [`SnapshotLink`]: reading the daemon's snapshots and rejections.
+
+use super::{classify, node, protocol_attributes, service_name, TransportError};
+use crate::message::{Pose, Rejection, SnapshotHeader};
+use crate::service::ServiceNames;
+use iceoryx2::port::listener::Listener;
+use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::prelude::*;
+use iceoryx2::sample::Sample;
+use std::time::{Duration, Instant};
+
+/// A snapshot in shared memory, borrowed for as long as it is held (at most
+/// two at a time per link).
+pub struct SnapshotSample(Sample<ipc::Service, [Pose], SnapshotHeader>);
+
+impl SnapshotSample {
+    /// The header.
+    pub fn header(&self) -> &SnapshotHeader {
+        self.0.user_header()
+    }
+
+    /// The poses, read in place.
+    pub fn poses(&self) -> &[Pose] {
+        self.0.payload()
+    }
+}
+
+/// Subscriber to snapshots and rejections of one namespace.
+pub struct SnapshotLink {
+    _node: Node<ipc::Service>,
+    poses: Subscriber<ipc::Service, [Pose], SnapshotHeader>,
+    published: Listener<ipc::Service>,
+    rejections: Subscriber<ipc::Service, Rejection, ()>,
+}
+
+impl SnapshotLink {
+    /// Opens the daemon's output services under `namespace`.
+    pub fn open(namespace: &str) -> Result<Self, TransportError> {
+        let names = ServiceNames::new(namespace);
+        let node = node("slamd-snapshots", false)?;
+        let attrs = protocol_attributes();
+        let poses = node
+            .service_builder(&service_name(&names.poses)?)
+            .publish_subscribe::<[Pose]>()
+            .user_header::<SnapshotHeader>()
+            .open_with_attributes(&attrs)
+            .map_err(|e| classify("open", namespace, &names.poses, &e))?
+            .subscriber_builder()
+            .create()
+            .map_err(|e| classify("open", namespace, &names.poses, &e))?;
+        let rejections = node
+            .service_builder(&service_name(&names.rejections)?)
+            .publish_subscribe::<Rejection>()
+            .open_with_attributes(&attrs)
+            .map_err(|e| classify("open", namespace, &names.rejections, &e))?
+            .subscriber_builder()
+            .create()
+            .map_err(|e| classify("open", namespace, &names.rejections, &e))?;
+        let published = node
+            .service_builder(&service_name(&names.published)?)
+            .event()
+            .open_with_attributes(&attrs)
+            .map_err(|e| classify("open", namespace, &names.published, &e))?
+            .listener_builder()
+            .create()
+            .map_err(|e| classify("open", namespace, &names.published, &e))?;
+        Ok(Self {
+            _node: node,
+            poses,
+            published,
+            rejections,
+        })
+    }
+
+    /// The newest snapshot delivered since the last call, if any (never
+    /// blocks).
+    pub fn latest(&self) -> Result<Option<SnapshotSample>, TransportError> {
+        let mut newest = None;
+        while let Some(s) = self
+            .poses
+            .receive()
+            .map_err(|e| TransportError::other("receive snapshot", e))?
+        {
+            newest = Some(SnapshotSample(s));
+        }
+        Ok(newest)
+    }
+
+    /// Waits up to `timeout` for a snapshot newer than the last one taken.
+    pub fn wait(&self, timeout: Duration) -> Result<Option<SnapshotSample>, TransportError> {
+        let deadline = Instant::now() + timeout;
+        loop {
+            if let Some(s) = self.latest()? {
+                return Ok(Some(s));
+            }
+            let left = deadline.saturating_duration_since(Instant::now());
+            if left.is_zero() {
+                return Ok(None);
+            }
+            self.published
+                .timed_wait(|_| {}, left)
+                .map_err(|e| TransportError::other("wait for a snapshot", e))?;
+        }
+    }
+
+    /// Every rejection delivered since the last call.
+    pub fn rejections(&self) -> Result<Vec<Rejection>, TransportError> {
+        let mut out = Vec::new();
+        while let Some(s) = self
+            .rejections
+            .receive()
+            .map_err(|e| TransportError::other("receive rejection", e))?
+        {
+            out.push(*s.payload());
+        }
+        Ok(out)
+    }
+}
