@@ -21,7 +21,9 @@
 //! equations factorised as keyframes and edges stream in, and re-solves in
 //! the background.
 //!
-//! **The plumbing**: [`io`] reads and writes graph files.
+//! **The plumbing**: [`io`] reads and writes graph files; [`config`]
+//! holds every setting; [`wire`] checks messages from frontends; [`ipc`]
+//! is the daemon and the frontend's side of shared memory.
 //!
 //! ```
 //! use slamd::geometry::Pose2;
@@ -46,13 +48,17 @@
 #![deny(missing_docs)]
 #![warn(clippy::unwrap_used)]
 
+pub mod affinity;
+pub mod config;
 pub mod engine;
 pub mod eval;
 pub mod geometry;
 pub mod graph;
 pub mod io;
+pub mod ipc;
 pub mod linear;
 pub mod nonlinear;
 pub mod solver;
 pub mod sparse;
 pub mod synthetic;
+pub mod wire;

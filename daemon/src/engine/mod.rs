@@ -12,7 +12,7 @@
 //! Both live in [`DynamicLdlt`](crate::sparse::dynamic::DynamicLdlt)
 //! factors: a new keyframe appends columns, a new edge or a reweight is a
 //! low-rank update. Every `resolve_every_edges` edges, or when the factor
-//! has filled in past `resolve_fill_ratio`, a re-solve ([`resolve`]) runs
+//! has filled in past `resolve_fill_ratio`, a re-solve (module `resolve`) runs
 //! on another thread: Levenberg–Marquardt polish, a fresh ordering with the
 //! newest keyframes last, a refactorisation; it then replays what arrived
 //! meanwhile and swaps in without stopping ingestion.
@@ -339,6 +339,11 @@ impl Engine {
         if self.job.is_none() && self.edges_since_resolve > 0 {
             self.start_resolve();
         }
+    }
+
+    /// True while a re-solve runs on its thread.
+    pub fn resolving(&self) -> bool {
+        self.job.is_some()
     }
 
     /// Waits for any running re-solve, then re-solves inline over

@@ -40,6 +40,9 @@ impl Job {
         let handle = std::thread::Builder::new()
             .name("slamd-resolve".into())
             .spawn(move || {
+                // the caller may be pinned to one core; a re-solve belongs on
+                // whichever core is free
+                crate::affinity::unpin_current_thread();
                 let outcome = run(model, &estimate, &config, &ops_rx);
                 let _ = done_tx.send(outcome);
             })

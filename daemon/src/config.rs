@@ -1,0 +1,269 @@
+//! [`Config`]: every setting of the daemon and its frontends, in one place.
+//!
+//! Defaults come from one `Default` impl, then a TOML file (`--config`),
+//! then `SLAMD_*` environment variables, each overriding the one before:
+//! `SLAMD_NAMESPACE=robot7`, `SLAMD_IPC__EDGE_BUFFER=8192`,
+//! `SLAMD_ENGINE__RESOLVE_EVERY_EDGES=500` (double underscores separate
+//! levels). `slamd run`, `slamd replay` and the client read the same
+//! settings, so a daemon and its frontends agree on the namespace.
+//!
+//! ```toml
+//! namespace = "slamd"          # service names live under it
+//! log = "info"                 # tracing filter (SLAMD_LOG overrides)
+//! held_edges = 100000          # edges kept waiting for their keyframes
+//! held_timeout_s = 30.0        # then rejected as naming an unknown keyframe
+//!
+//! [ipc]
+//! max_frontends = 16
+//! max_subscribers = 8
+//! keyframe_buffer = 1024       # queue lengths on the daemon's side
+//! edge_buffer = 4096
+//! gps_buffer = 1024
+//! initial_poses = 16384        # snapshot size reserved at start (it grows)
+//! backpressure_ms = 200        # a frontend's send waits this long on a full queue
+//! tick_ms = 250                # dead-node cleanup and idle work
+//! # cpu = 0                    # pin the IPC and engine threads (re-solves run anywhere)
+//!
+//! [snapshot]
+//! max_rate_hz = 0.0            # 0: one snapshot per processed batch
+//!
+//! [engine]                     # see slamd::engine::EngineConfig
+//! resolve_every_edges = 1000
+//! ```
+
+use crate::engine::EngineConfig;
+use serde::{Deserialize, Serialize};
+use slamd_protocol::service::{Qos, DEFAULT_NAMESPACE};
+use std::fmt;
+use std::path::Path;
+use std::time::Duration;
+
+/// Why the configuration cannot be used.
+#[derive(Debug)]
+pub struct ConfigError(String);
+
+impl fmt::Display for ConfigError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "configuration: {}", self.0)
+    }
+}
+
+impl std::error::Error for ConfigError {}
+
+/// Shared-memory sizes and timings.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct IpcConfig {
+    /// Frontends that may publish at once.
+    pub max_frontends: usize,
+    /// Snapshot subscribers at once.
+    pub max_subscribers: usize,
+    /// Keyframes the daemon's queue holds.
+    pub keyframe_buffer: usize,
+    /// Edges the daemon's queue holds.
+    pub edge_buffer: usize,
+    /// GPS fixes the daemon's queue holds.
+    pub gps_buffer: usize,
+    /// Poses the snapshot publisher reserves at start.
+    pub initial_poses: usize,
+    /// How long a frontend's send retries on a full queue before failing.
+    pub backpressure_ms: u64,
+    /// Period of dead-node cleanup and idle work.
+    pub tick_ms: u64,
+    /// Pin the daemon's IPC and engine threads to this CPU (re-solves still
+    /// use any). On a small VM a wake-up across cores costs several times
+    /// one on the same core; frontends that share the core answer fastest.
+    pub cpu: Option<usize>,
+}
+
+impl Default for IpcConfig {
+    fn default() -> Self {
+        let q = Qos::default();
+        Self {
+            max_frontends: q.max_frontends,
+            max_subscribers: q.max_subscribers,
+            keyframe_buffer: q.keyframe_buffer,
+            edge_buffer: q.edge_buffer,
+            gps_buffer: q.gps_buffer,
+            initial_poses: q.initial_poses,
+            backpressure_ms: 200,
+            tick_ms: 250,
+            cpu: None,
+        }
+    }
+}
+
+/// How snapshots go out.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SnapshotConfig {
+    /// Upper bound on snapshots per second (0: one per processed batch).
+    pub max_rate_hz: f64,
+}
+
+impl Default for SnapshotConfig {
+    fn default() -> Self {
+        Self { max_rate_hz: 0.0 }
+    }
+}
+
+/// Every setting of slamd.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Config {
+    /// Service names live under this namespace.
+    pub namespace: String,
+    /// Log filter (tracing's `EnvFilter` syntax).
+    pub log: String,
+    /// Edges kept waiting for a keyframe that has not arrived.
+    pub held_edges: usize,
+    /// Seconds an edge may wait for its keyframe before it is rejected.
+    pub held_timeout_s: f64,
+    /// Shared memory.
+    pub ipc: IpcConfig,
+    /// Snapshot publication.
+    pub snapshot: SnapshotConfig,
+    /// The incremental engine.
+    pub engine: EngineConfig,
+}
+
+impl Default for Config {
+    fn default() -> Self {
+        Self {
+            namespace: DEFAULT_NAMESPACE.to_string(),
+            log: "info".to_string(),
+            held_edges: 100_000,
+            held_timeout_s: 30.0,
+            ipc: IpcConfig::default(),
+            snapshot: SnapshotConfig::default(),
+            engine: EngineConfig::default(),
+        }
+    }
+}
+
+impl Config {
+    /// Defaults, overridden by `file` (TOML) if given, then by `SLAMD_*`
+    /// environment variables; validated.
+    pub fn load(file: Option<&Path>) -> Result<Config, ConfigError> {
+        let err = |e: config::ConfigError| ConfigError(e.to_string());
+        let mut builder =
+            config::Config::builder().add_source(config::Config::try_from(&Config::default()).map_err(err)?);
+        if let Some(path) = file {
+            if !path.exists() {
+                return Err(ConfigError(format!("{} does not exist", path.display())));
+            }
+            builder = builder.add_source(config::File::from(path).format(config::FileFormat::Toml));
+        }
+        builder = builder.add_source(
+            config::Environment::with_prefix("SLAMD")
+                .prefix_separator("_")
+                .separator("__")
+                .try_parsing(true),
+        );
+        let c: Config = builder.build().map_err(err)?.try_deserialize().map_err(err)?;
+        c.validate()?;
+        Ok(c)
+    }
+
+    /// Checks values that parse but make no sense.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        let bad = |m: String| Err(ConfigError(m));
+        if self.namespace.is_empty()
+            || self.namespace.len() > 200
+            || self.namespace.contains(char::is_whitespace)
+        {
+            return bad(format!(
+                "namespace `{}` must be 1-200 characters without spaces",
+                self.namespace
+            ));
+        }
+        let i = &self.ipc;
+        for (name, v) in [
+            ("ipc.max_frontends", i.max_frontends),
+            ("ipc.max_subscribers", i.max_subscribers),
+            ("ipc.keyframe_buffer", i.keyframe_buffer),
+            ("ipc.edge_buffer", i.edge_buffer),
+            ("ipc.gps_buffer", i.gps_buffer),
+            ("ipc.initial_poses", i.initial_poses),
+        ] {
+            if v == 0 {
+                return bad(format!("{name} must be at least 1"));
+            }
+        }
+        if i.tick_ms == 0 {
+            return bad("ipc.tick_ms must be at least 1".into());
+        }
+        if !self.snapshot.max_rate_hz.is_finite() || self.snapshot.max_rate_hz < 0.0 {
+            return bad(format!(
+                "snapshot.max_rate_hz {} must be a number ≥ 0",
+                self.snapshot.max_rate_hz
+            ));
+        }
+        if self.held_timeout_s.is_nan() || self.held_timeout_s <= 0.0 {
+            return bad(format!("held_timeout_s {} must be > 0", self.held_timeout_s));
+        }
+        Ok(())
+    }
+
+    /// The service sizes for the transport.
+    pub fn qos(&self) -> Qos {
+        let i = &self.ipc;
+        Qos {
+            max_frontends: i.max_frontends,
+            max_subscribers: i.max_subscribers,
+            keyframe_buffer: i.keyframe_buffer,
+            edge_buffer: i.edge_buffer,
+            gps_buffer: i.gps_buffer,
+            initial_poses: i.initial_poses,
+            ..Qos::default()
+        }
+    }
+
+    /// The frontend's send timeout on a full queue.
+    pub fn backpressure(&self) -> Duration {
+        Duration::from_millis(self.ipc.backpressure_ms)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn file_then_environment_override_defaults() {
+        let dir = std::env::temp_dir().join(format!("slamd-config-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("slamd.toml");
+        std::fs::write(
+            &path,
+            "namespace = \"from-file\"\n[ipc]\nedge_buffer = 77\n[engine]\nresolve_every_edges = 5\n",
+        )
+        .unwrap();
+        let c = Config::load(Some(&path)).unwrap();
+        assert_eq!(c.namespace, "from-file");
+        assert_eq!(c.ipc.edge_buffer, 77);
+        assert_eq!(c.engine.resolve_every_edges, 5);
+        assert_eq!(c.ipc.gps_buffer, IpcConfig::default().gps_buffer);
+    }
+
+    #[test]
+    fn bad_values_are_named() {
+        let c = Config {
+            ipc: IpcConfig {
+                edge_buffer: 0,
+                ..Default::default()
+            },
+            ..Default::default()
+        };
+        assert_eq!(
+            c.validate().unwrap_err().to_string(),
+            "configuration: ipc.edge_buffer must be at least 1"
+        );
+        let dir = std::env::temp_dir().join(format!("slamd-config-bad-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("bad.toml");
+        std::fs::write(&path, "nmespace = \"typo\"\n").unwrap();
+        let e = Config::load(Some(&path)).unwrap_err().to_string();
+        assert!(e.contains("nmespace"), "{e}");
+    }
+}

@@ -1,0 +1,298 @@
+//! The daemon's engine thread: applies each batch of messages, holds edges
+//! for missing keyframes, publishes one snapshot per batch.
+
+use super::held::{Held, HeldEdge};
+use crate::config::Config;
+use crate::engine::{EdgeInput, Engine, EngineError};
+use crate::geometry::Pose2;
+use crate::graph::{GraphError, KeyframeId};
+use crate::wire::{engine_rejection, Origin};
+use crossbeam::channel::{Receiver, RecvTimeoutError};
+use slamd_protocol::message::kind;
+use slamd_protocol::transport::{Outlet, TransportError};
+use slamd_protocol::{
+    FrontendAck, Pose, Rejection, RejectionReason, SnapshotHeader, MAX_FRONTENDS, PROTOCOL_VERSION,
+};
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+
+/// What the IPC thread hands over.
+#[derive(Clone, Debug)]
+pub enum Msg {
+    /// A checked keyframe.
+    Keyframe(Origin, KeyframeId, Option<Pose2>),
+    /// A checked edge.
+    Edge(Origin, EdgeInput),
+    /// A message refused on arrival; publish and count it.
+    Rejected(Rejection),
+    /// The IPC thread has handed over everything it had.
+    Drained,
+    /// The IPC thread's timer ticked.
+    Tick,
+    /// Stop (SIGINT or SIGTERM).
+    Shutdown,
+}
+
+/// Counters the snapshot header reports.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Counters {
+    /// Keyframes accepted.
+    pub keyframes: u64,
+    /// Edges accepted (including those still held).
+    pub edges: u64,
+    /// Messages rejected.
+    pub rejected: u64,
+}
+
+/// The engine thread's state.
+pub struct EngineLoop {
+    engine: Engine,
+    outlet: Outlet,
+    held: Held,
+    config: Config,
+    counters: Counters,
+    acks: Vec<FrontendAck>,
+    dirty: bool,
+    last_publish: Option<Instant>,
+    last_input: Instant,
+}
+
+impl EngineLoop {
+    pub fn new(config: Config, outlet: Outlet) -> Self {
+        Self {
+            engine: Engine::new(config.engine.clone()),
+            outlet,
+            held: Held::default(),
+            config,
+            counters: Counters::default(),
+            acks: Vec::with_capacity(MAX_FRONTENDS),
+            dirty: false,
+            last_publish: None,
+            last_input: Instant::now(),
+        }
+    }
+
+    /// Runs until [`Msg::Shutdown`] or the channel closes. Each wake
+    /// applies every message already queued, then publishes once.
+    pub fn run(mut self, rx: Receiver<Msg>) -> Counters {
+        let tick = Duration::from_millis(self.config.ipc.tick_ms);
+        loop {
+            let first = match rx.recv_timeout(self.wait_time(tick)) {
+                Ok(m) => m,
+                Err(RecvTimeoutError::Timeout) => Msg::Tick,
+                Err(RecvTimeoutError::Disconnected) => break,
+            };
+            if !self.handle(first) {
+                break;
+            }
+            let mut open = true;
+            while let Ok(m) = rx.try_recv() {
+                if !self.handle(m) {
+                    open = false;
+                    break;
+                }
+            }
+            self.publish_if_due();
+            if !open {
+                break;
+            }
+        }
+        // whatever arrived last goes out
+        self.last_publish = None;
+        self.publish_if_due();
+        self.counters
+    }
+
+    /// How long to block: until the rate cap allows the pending snapshot,
+    /// else a tick.
+    fn wait_time(&self, tick: Duration) -> Duration {
+        match (self.dirty, self.min_interval(), self.last_publish) {
+            (true, Some(min), Some(last)) => {
+                min.saturating_sub(last.elapsed()).max(Duration::from_micros(100))
+            }
+            _ => tick,
+        }
+    }
+
+    fn min_interval(&self) -> Option<Duration> {
+        let hz = self.config.snapshot.max_rate_hz;
+        (hz > 0.0).then(|| Duration::from_secs_f64(1.0 / hz))
+    }
+
+    /// Applies one message; `false` means stop.
+    fn handle(&mut self, msg: Msg) -> bool {
+        match msg {
+            Msg::Keyframe(o, id, guess) => {
+                self.last_input = Instant::now();
+                match self.engine.add_keyframe(id, guess) {
+                    Ok(_) => {
+                        self.counters.keyframes += 1;
+                        self.dirty = true;
+                        for h in self.held.release(id) {
+                            self.add_edge(h.origin, h.edge, h.since);
+                        }
+                    }
+                    Err(e) => self.reject(engine_rejection(o, kind::KEYFRAME, [id, 0], &e)),
+                }
+                self.ack(o);
+            }
+            Msg::Edge(o, edge) => {
+                self.last_input = Instant::now();
+                self.add_edge(o, edge, Instant::now());
+                self.ack(o);
+            }
+            Msg::Rejected(r) => {
+                self.reject(r);
+                self.ack(Origin {
+                    frontend: r.frontend,
+                    sequence: r.sequence,
+                });
+            }
+            Msg::Drained => {}
+            Msg::Tick => self.tick(),
+            Msg::Shutdown => return false,
+        }
+        true
+    }
+
+    /// Adds an edge, or holds it while one of its keyframes is missing.
+    fn add_edge(&mut self, o: Origin, edge: EdgeInput, since: Instant) {
+        match self.engine.add_edge(edge) {
+            Ok(_) => {
+                self.counters.edges += 1;
+                self.dirty = true;
+            }
+            Err(EngineError::Graph(GraphError::UnknownKeyframe(missing))) => {
+                let h = HeldEdge {
+                    origin: o,
+                    edge,
+                    since,
+                };
+                if !self.held.hold(missing, h, self.config.held_edges) {
+                    self.reject(Rejection::new(
+                        o.frontend,
+                        o.sequence,
+                        kind::EDGE,
+                        RejectionReason::HeldOverflow,
+                        [edge.from, edge.to],
+                        &format!(
+                            "edge {}→{}: {} edges already wait for keyframes (held_edges)",
+                            edge.from,
+                            edge.to,
+                            self.held.len()
+                        ),
+                    ));
+                }
+            }
+            Err(e) => self.reject(engine_rejection(o, kind::EDGE, [edge.from, edge.to], &e)),
+        }
+    }
+
+    fn reject(&mut self, r: Rejection) {
+        self.counters.rejected += 1;
+        tracing::warn!(frontend = r.frontend, sequence = r.sequence, reason = ?r.reason(), "{}", r.text());
+        if let Err(e) = self.outlet.reject(r) {
+            tracing::error!(error = %e, "Cannot publish a rejection.");
+        }
+    }
+
+    /// Records that `o` was taken in (applied, held or rejected).
+    fn ack(&mut self, o: Origin) {
+        if o.frontend == 0 {
+            return;
+        }
+        if let Some(a) = self.acks.iter_mut().find(|a| a.frontend == o.frontend) {
+            a.sequence = a.sequence.max(o.sequence);
+            return;
+        }
+        if self.acks.len() == MAX_FRONTENDS {
+            self.acks.remove(0);
+        }
+        self.acks.push(FrontendAck {
+            frontend: o.frontend,
+            reserved: 0,
+            sequence: o.sequence,
+        });
+    }
+
+    /// Idle work: expire waiting edges; when input has paused, let the
+    /// engine re-solve; swap a finished re-solve in.
+    fn tick(&mut self) {
+        let limit = Duration::from_secs_f64(self.config.held_timeout_s);
+        for (missing, h) in self.held.expire(Instant::now(), limit) {
+            self.reject(Rejection::new(
+                h.origin.frontend,
+                h.origin.sequence,
+                kind::EDGE,
+                RejectionReason::UnknownKeyframe,
+                [h.edge.from, h.edge.to],
+                &format!(
+                    "edge {}→{}: keyframe {missing} did not arrive within {} s",
+                    h.edge.from, h.edge.to, self.config.held_timeout_s
+                ),
+            ));
+        }
+        let tick = Duration::from_millis(self.config.ipc.tick_ms);
+        if self.last_input.elapsed() >= tick {
+            self.engine.idle();
+        }
+        if self.engine.resolving() {
+            // a finished re-solve is swapped in at the next update
+            self.dirty = true;
+        }
+    }
+
+    fn publish_if_due(&mut self) {
+        if !self.dirty {
+            return;
+        }
+        if let (Some(min), Some(last)) = (self.min_interval(), self.last_publish) {
+            if last.elapsed() < min {
+                return;
+            }
+        }
+        let t0 = Instant::now();
+        let report = self.engine.update();
+        let solved = t0.elapsed();
+        let snap = self.engine.snapshot();
+        let header = SnapshotHeader {
+            protocol: PROTOCOL_VERSION,
+            reserved: 0,
+            version: snap.version,
+            poses: 0,
+            chi2: snap.chi2,
+            solved_at_ns: SystemTime::now()
+                .duration_since(UNIX_EPOCH)
+                .map_or(0, |d| d.as_nanos() as u64),
+            keyframes: self.counters.keyframes,
+            edges: self.counters.edges,
+            rejected: self.counters.rejected,
+            held: self.held.len() as u64,
+            resolves: snap.resolves as u64,
+            acks: {
+                let mut a = [FrontendAck::default(); MAX_FRONTENDS];
+                a[..self.acks.len()].copy_from_slice(&self.acks);
+                a
+            },
+        };
+        let poses = snap.poses().map(|(id, p)| Pose {
+            id,
+            x: p.x,
+            y: p.y,
+            theta: p.theta,
+        });
+        let result: Result<(), TransportError> = self.outlet.publish(header, snap.len(), poses);
+        if let Err(e) = result {
+            tracing::error!(error = %e, "Cannot publish a snapshot.");
+        }
+        tracing::debug!(
+            version = report.version,
+            moved = report.moved,
+            chi2 = report.chi2,
+            solve_us = solved.as_micros() as u64,
+            publish_us = (t0.elapsed() - solved).as_micros() as u64,
+            "Snapshot published."
+        );
+        self.dirty = false;
+        self.last_publish = Some(Instant::now());
+    }
+}

@@ -1,0 +1,178 @@
+//! [`serve`]: the daemon's main loop and its two threads.
+
+use super::engine_loop::{Counters, EngineLoop, Msg};
+use crate::config::Config;
+use crate::wire;
+use crossbeam::channel;
+use slamd_protocol::transport::{Exit, Ingress, Input, Outlet, TransportError, Wake};
+use std::fmt;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::thread::JoinHandle;
+use std::time::Duration;
+
+/// Why the daemon could not serve.
+#[derive(Debug)]
+pub enum ServeError {
+    /// Shared memory could not be set up or used.
+    Transport(TransportError),
+    /// The engine thread stopped unexpectedly.
+    EngineThread(String),
+}
+
+impl fmt::Display for ServeError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            ServeError::Transport(e) => e.fmt(f),
+            ServeError::EngineThread(e) => write!(f, "engine thread: {e}"),
+        }
+    }
+}
+
+impl std::error::Error for ServeError {}
+
+impl From<TransportError> for ServeError {
+    fn from(e: TransportError) -> Self {
+        ServeError::Transport(e)
+    }
+}
+
+/// Serves `config.namespace` until SIGINT or SIGTERM, then returns the
+/// counts of what it took in.
+///
+/// Start-up checks `/dev/shm`, removes what dead slamd processes left, and
+/// creates every service; a second daemon on the same namespace, or a
+/// stale service of another protocol version, is a clear error here.
+pub fn serve(config: &Config) -> Result<Counters, ServeError> {
+    serve_until(config, &AtomicBool::new(false))
+}
+
+/// [`serve`], also stopping within a tick once `stop` is set.
+pub fn serve_until(config: &Config, stop: &AtomicBool) -> Result<Counters, ServeError> {
+    if let Some(cpu) = config.ipc.cpu {
+        if !crate::affinity::pin_current_thread(cpu) {
+            tracing::warn!(cpu, "Cannot pin the IPC thread; running unpinned.");
+        }
+    }
+    let ingress = Ingress::create(&config.namespace, &config.qos())?;
+    tracing::info!(
+        namespace = %config.namespace,
+        shared_memory_mib = config.qos().shared_memory_bytes() >> 20,
+        cleaned_dead_nodes = ingress.cleaned_at_start(),
+        "slamd serving."
+    );
+    let (tx, rx) = channel::unbounded::<Msg>();
+    let (ready_tx, ready_rx) = channel::bounded::<Result<(), TransportError>>(1);
+    let engine_config = config.clone();
+    let engine = std::thread::Builder::new()
+        .name("slamd-engine".into())
+        .spawn(move || {
+            if let Some(cpu) = engine_config.ipc.cpu {
+                crate::affinity::pin_current_thread(cpu);
+            }
+            // iceoryx2 ports are not Send: the outlet is opened on this thread
+            match Outlet::open(&engine_config.namespace, &engine_config.qos()) {
+                Ok(outlet) => {
+                    let _ = ready_tx.send(Ok(()));
+                    EngineLoop::new(engine_config, outlet).run(rx)
+                }
+                Err(e) => {
+                    let _ = ready_tx.send(Err(e));
+                    Counters::default()
+                }
+            }
+        })
+        .map_err(|e| ServeError::EngineThread(e.to_string()))?;
+    ready_rx
+        .recv()
+        .map_err(|_| ServeError::EngineThread("stopped during start-up".into()))??;
+
+    let tick = Duration::from_millis(config.ipc.tick_ms);
+    let exit = ingress.run(tick, |wake| {
+        let msg = match wake {
+            Wake::Input(Input::Keyframe(m)) => match wire::keyframe_in(&m) {
+                Ok((o, id, guess)) => Msg::Keyframe(o, id, guess),
+                Err(r) => Msg::Rejected(r),
+            },
+            Wake::Input(Input::Edge(m)) => match wire::edge_in(&m) {
+                Ok((o, e)) => Msg::Edge(o, e),
+                Err(r) => Msg::Rejected(r),
+            },
+            Wake::Input(Input::Gps(_)) => return true,
+            Wake::Drained => Msg::Drained,
+            Wake::Tick if stop.load(Ordering::Relaxed) => return false,
+            Wake::Tick => Msg::Tick,
+        };
+        tx.send(msg).is_ok()
+    });
+    let _ = tx.send(Msg::Shutdown);
+    let counters = engine
+        .join()
+        .map_err(|_| ServeError::EngineThread("panicked".into()))?;
+    match exit? {
+        Exit::Signal => tracing::info!(?counters, "Signal received; slamd stopped."),
+        Exit::Stopped => tracing::info!(?counters, "slamd stopped."),
+    }
+    Ok(counters)
+}
+
+/// A daemon on a thread of this process: for examples, tests and
+/// applications that want the shared-memory interface without a separate
+/// process.
+pub struct Server {
+    stop: Arc<AtomicBool>,
+    thread: Option<JoinHandle<Result<Counters, ServeError>>>,
+}
+
+impl Server {
+    /// Serves `config.namespace` on a new thread; returns once frontends can
+    /// connect (or with the start-up error).
+    pub fn spawn(config: Config) -> Result<Server, ServeError> {
+        let stop = Arc::new(AtomicBool::new(false));
+        let flag = stop.clone();
+        let namespace = config.namespace.clone();
+        let thread = std::thread::Builder::new()
+            .name("slamd-server".into())
+            .spawn(move || serve_until(&config, &flag))
+            .map_err(|e| ServeError::EngineThread(e.to_string()))?;
+        let server = Server {
+            stop,
+            thread: Some(thread),
+        };
+        // up when its services can be opened
+        let deadline = std::time::Instant::now() + Duration::from_secs(10);
+        loop {
+            if slamd_protocol::transport::SnapshotLink::open(&namespace).is_ok() {
+                return Ok(server);
+            }
+            if server.thread.as_ref().is_some_and(|t| t.is_finished()) || std::time::Instant::now() > deadline
+            {
+                return Err(server
+                    .join()
+                    .err()
+                    .unwrap_or(ServeError::EngineThread("did not start".into())));
+            }
+            std::thread::sleep(Duration::from_millis(5));
+        }
+    }
+
+    /// Stops serving and returns what it took in.
+    pub fn join(mut self) -> Result<Counters, ServeError> {
+        self.stop.store(true, Ordering::Relaxed);
+        match self.thread.take() {
+            Some(t) => t
+                .join()
+                .map_err(|_| ServeError::EngineThread("panicked".into()))?,
+            None => Ok(Counters::default()),
+        }
+    }
+}
+
+impl Drop for Server {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+}
