@@ -12,6 +12,8 @@ pub struct Cli {
 
 #[derive(Subcommand, Debug)]
 pub enum Command {
+    /// Run the daemon: serve frontends over shared memory until SIGINT or SIGTERM.
+    Run(crate::run::RunOpts),
     /// Solve a whole graph file at once and report χ², ATE and time.
     Solve(crate::solve::SolveOpts),
     /// Run the demo: solve the built-in synthetic world and draw its map.

@@ -1,19 +1,26 @@
 //! `slamd replay FILE`: stream a dataset in time order, one snapshot per
 //! keyframe, and report latency and accuracy.
 //!
-//! `--embedded` runs the engine in this process. A keyframe's edges arrive
-//! together, as a frontend publishes them; its latency runs from their
-//! arrival (before the first is applied) to its snapshot being ready.
+//! A keyframe's edges arrive together, as a frontend publishes them; its
+//! latency runs from their arrival to the snapshot that contains them.
+//! `--embedded` runs the engine in this process (arrival: before the first
+//! edge is applied; snapshot: after the update). Otherwise the edges travel
+//! to a running daemon over shared memory (arrival: before the first is
+//! published; snapshot: received with an acknowledgement of the last).
 
 use crate::solve::file_name;
-use anyhow::Context;
+use anyhow::{bail, Context};
 use clap::Args;
+use slamd::config::Config;
 use slamd::engine::{EdgeInput, Engine, EngineConfig, SnapshotSource};
-use slamd::graph::{chi2, PoseGraph};
+use slamd::geometry::Pose2;
+use slamd::graph::{chi2, KeyframeId, PoseGraph};
 use slamd::io;
+use slamd::ipc::{Frontend, Snapshots};
 use slamd::solver::{solve_batch, BatchOptions};
+use std::collections::{HashMap, VecDeque};
 use std::path::PathBuf;
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 #[derive(Args, Debug)]
 pub struct ReplayOpts {
@@ -22,6 +29,10 @@ pub struct ReplayOpts {
     /// Run the engine in this process instead of talking to a daemon.
     #[arg(long)]
     pub embedded: bool,
+    /// Publish at most this many keyframes per second (daemon mode; default:
+    /// each keyframe waits for its snapshot).
+    #[arg(long)]
+    pub rate: Option<f64>,
     /// Ground truth for the ATE of the final estimate.
     #[arg(long)]
     pub ground_truth: Option<PathBuf>,
@@ -29,24 +40,41 @@ pub struct ReplayOpts {
     /// their own prefix (slow on big files: one batch solve each).
     #[arg(long, default_value_t = 0)]
     pub check_prefixes: usize,
-    /// Re-solve every this many edges (0: only on fill).
+    /// TOML configuration (namespace, and the engine for --embedded).
+    #[arg(long, env = "SLAMD_CONFIG")]
+    pub config: Option<PathBuf>,
+    /// Namespace of the daemon (overrides the configuration).
+    #[arg(long)]
+    pub namespace: Option<String>,
+    /// Seconds to wait for the daemon's answer before giving up.
+    #[arg(long, default_value_t = 5.0)]
+    pub timeout: f64,
+    /// Re-solve every this many edges (--embedded; 0: only on fill).
     #[arg(long)]
     pub resolve_every: Option<usize>,
-    /// Snapshot source between re-solves: linear or gauss-newton.
+    /// Snapshot source between re-solves (--embedded): linear or gauss-newton.
     #[arg(long, value_parser = parse_source)]
     pub snapshot: Option<SnapshotSource>,
-    /// Defer consistent loop closures below this χ² (see EngineConfig).
+    /// Defer consistent loop closures below this χ² (--embedded).
     #[arg(long)]
     pub defer_chi2: Option<f64>,
-    /// Keyframes kept last in a fresh ordering (see EngineConfig).
+    /// Keyframes kept last in a fresh ordering (--embedded).
     #[arg(long)]
     pub recent_last: Option<usize>,
-    /// Write one line per keyframe (`k chi2 latency_us moved resolved`).
+    /// Write one line per keyframe (`k chi2 latency_us`).
     #[arg(long)]
     pub trace: Option<PathBuf>,
     /// Print one JSON object instead of a table.
     #[arg(long)]
     pub json: bool,
+}
+
+fn parse_source(s: &str) -> Result<SnapshotSource, String> {
+    match s {
+        "linear" => Ok(SnapshotSource::Linear),
+        "gauss-newton" => Ok(SnapshotSource::GaussNewton),
+        _ => Err(format!("unknown snapshot source `{s}` (linear, gauss-newton)")),
+    }
 }
 
 /// Latency percentiles of a run, in microseconds.
@@ -74,17 +102,283 @@ impl Latency {
     }
 }
 
-/// Edge indices grouped by the keyframe that makes them available.
-pub fn edges_by_keyframe(graph: &PoseGraph) -> Vec<Vec<usize>> {
+/// Where a replay sends its keyframes.
+pub trait Sink {
+    /// Sends keyframe `id` with its edges; returns latencies (µs) of the
+    /// keyframes whose snapshot arrived meanwhile, with their index.
+    fn keyframe(
+        &mut self,
+        k: usize,
+        id: KeyframeId,
+        edges: &[EdgeInput],
+    ) -> anyhow::Result<Vec<(usize, f64)>>;
+    /// Waits for every outstanding snapshot; returns their latencies.
+    fn drain(&mut self) -> anyhow::Result<Vec<(usize, f64)>>;
+    /// The current estimate, by keyframe id.
+    fn poses(&mut self) -> anyhow::Result<HashMap<KeyframeId, Pose2>>;
+    /// The final estimate after the re-solve that ends the stream, with the
+    /// number of re-solves.
+    fn finish(&mut self) -> anyhow::Result<(HashMap<KeyframeId, Pose2>, usize)>;
+    /// "embedded" or "daemon".
+    fn mode(&self) -> &'static str;
+}
+
+/// The engine in this process.
+pub struct EmbeddedSink(pub Engine);
+
+impl Sink for EmbeddedSink {
+    fn keyframe(
+        &mut self,
+        k: usize,
+        id: KeyframeId,
+        edges: &[EdgeInput],
+    ) -> anyhow::Result<Vec<(usize, f64)>> {
+        self.0.add_keyframe(id, None)?;
+        let arrival = Instant::now();
+        for e in edges {
+            self.0.add_edge(*e)?;
+        }
+        self.0.update();
+        Ok(if edges.is_empty() {
+            vec![]
+        } else {
+            vec![(k, arrival.elapsed().as_secs_f64() * 1e6)]
+        })
+    }
+
+    fn drain(&mut self) -> anyhow::Result<Vec<(usize, f64)>> {
+        Ok(vec![])
+    }
+
+    fn poses(&mut self) -> anyhow::Result<HashMap<KeyframeId, Pose2>> {
+        Ok(self.0.snapshot().poses().collect())
+    }
+
+    fn finish(&mut self) -> anyhow::Result<(HashMap<KeyframeId, Pose2>, usize)> {
+        self.0.resolve_now();
+        Ok((self.poses()?, self.0.stats().resolves))
+    }
+
+    fn mode(&self) -> &'static str {
+        "embedded"
+    }
+}
+
+/// A running daemon, over shared memory.
+pub struct DaemonSink {
+    frontend: Frontend,
+    snapshots: Snapshots,
+    timeout: Duration,
+    namespace: String,
+    /// (keyframe index, last message number, publish time) awaiting a snapshot
+    pending: VecDeque<(usize, u64, Instant)>,
+    latest: Option<slamd::ipc::SnapshotSample>,
+    pace: Option<(Instant, Duration)>,
+}
+
+impl DaemonSink {
+    pub fn connect(
+        namespace: &str,
+        config: &Config,
+        timeout: Duration,
+        rate: Option<f64>,
+    ) -> anyhow::Result<Self> {
+        let frontend = Frontend::connect_to(namespace, config.backpressure())?;
+        let snapshots = Snapshots::open(namespace)?;
+        Ok(Self {
+            frontend,
+            snapshots,
+            timeout,
+            namespace: namespace.to_string(),
+            pending: VecDeque::new(),
+            latest: None,
+            pace: rate.map(|hz| (Instant::now(), Duration::from_secs_f64(1.0 / hz))),
+        })
+    }
+
+    /// Takes in the snapshots that arrived; returns the latencies they settle.
+    fn collect(&mut self, wait: Duration) -> anyhow::Result<Vec<(usize, f64)>> {
+        let mut done = Vec::new();
+        if let Some(s) = self.snapshots.wait(wait)? {
+            let now = Instant::now();
+            if let Some(acked) = s.header().ack_of(self.frontend.id()) {
+                while self.pending.front().is_some_and(|p| p.1 <= acked) {
+                    let (k, _, t) = self.pending.pop_front().expect("non-empty");
+                    done.push((k, now.duration_since(t).as_secs_f64() * 1e6));
+                }
+            }
+            self.latest = Some(s);
+        }
+        Ok(done)
+    }
+
+    fn no_answer(&self) -> anyhow::Error {
+        anyhow::anyhow!(
+            "the daemon serving `{}` did not answer within {:.1} s (is `slamd run` alive?)",
+            self.namespace,
+            self.timeout.as_secs_f64()
+        )
+    }
+}
+
+impl Sink for DaemonSink {
+    fn keyframe(
+        &mut self,
+        k: usize,
+        id: KeyframeId,
+        edges: &[EdgeInput],
+    ) -> anyhow::Result<Vec<(usize, f64)>> {
+        let mut done = Vec::new();
+        if let Some((start, period)) = self.pace {
+            // paced: take in snapshots until this keyframe's slot
+            let slot = start + period * k as u32;
+            while let Some(left) = slot.checked_duration_since(Instant::now()) {
+                done.extend(self.collect(left)?);
+            }
+        }
+        let arrival = Instant::now();
+        let mut last = self.frontend.add_keyframe(id, 0, None)?;
+        for e in edges {
+            last = self.frontend.add_edge(e)?;
+        }
+        self.frontend.flush()?;
+        if !edges.is_empty() {
+            self.pending.push_back((k, last, arrival));
+        }
+        if self.pace.is_none() {
+            done.extend(self.drain()?);
+        }
+        Ok(done)
+    }
+
+    fn drain(&mut self) -> anyhow::Result<Vec<(usize, f64)>> {
+        let mut done = Vec::new();
+        let deadline = Instant::now() + self.timeout;
+        while !self.pending.is_empty() {
+            let left = deadline.saturating_duration_since(Instant::now());
+            if left.is_zero() {
+                return Err(self.no_answer());
+            }
+            done.extend(self.collect(left)?);
+        }
+        Ok(done)
+    }
+
+    fn poses(&mut self) -> anyhow::Result<HashMap<KeyframeId, Pose2>> {
+        let s = self.latest.as_ref().ok_or_else(|| self.no_answer())?;
+        Ok(s.poses()
+            .iter()
+            .map(|p| (p.id, Pose2::new(p.x, p.y, p.theta)))
+            .collect())
+    }
+
+    fn finish(&mut self) -> anyhow::Result<(HashMap<KeyframeId, Pose2>, usize)> {
+        self.drain()?;
+        // the daemon re-solves once input pauses; wait for that snapshot
+        let before = self.latest.as_ref().map_or(0, |s| s.header().resolves);
+        let deadline = Instant::now() + self.timeout.max(Duration::from_secs(30));
+        while Instant::now() < deadline {
+            match self.snapshots.wait(Duration::from_secs(3))? {
+                Some(s) => {
+                    let resolved = s.header().resolves > before;
+                    self.latest = Some(s);
+                    if resolved {
+                        break;
+                    }
+                }
+                None => break, // quiet: nothing left to re-solve
+            }
+        }
+        let resolves = self.latest.as_ref().map_or(0, |s| s.header().resolves as usize);
+        Ok((self.poses()?, resolves))
+    }
+
+    fn mode(&self) -> &'static str {
+        "daemon"
+    }
+}
+
+/// A graph's keyframes in order, each with the edges that it makes
+/// available (its newer end), as engine inputs.
+pub fn stream(graph: &PoseGraph) -> Vec<(KeyframeId, Vec<EdgeInput>)> {
     let mut groups = vec![Vec::new(); graph.len()];
     for e in graph.time_order() {
-        groups[graph.edges()[e].newer()].push(e);
+        let edge = graph.edges()[e];
+        groups[edge.newer()].push(EdgeInput::new(
+            graph.id_of(edge.from),
+            graph.id_of(edge.to),
+            edge.measurement,
+            edge.information,
+            edge.kind,
+        ));
     }
     groups
+        .into_iter()
+        .enumerate()
+        .map(|(k, g)| (graph.id_of(k), g))
+        .collect()
+}
+
+/// What a replay measured.
+pub struct Outcome {
+    pub latencies: Vec<f64>,
+    pub trace: Vec<(usize, f64)>,
+    pub total_s: f64,
+    pub resolves: usize,
+    pub poses: Vec<Pose2>,
+    pub checked: Vec<(usize, Vec<Pose2>)>,
+}
+
+/// Streams `graph` into `sink`; `progress` is told of each keyframe.
+pub fn replay(
+    graph: &PoseGraph,
+    sink: &mut dyn Sink,
+    checkpoints: &[usize],
+    mut progress: impl FnMut(usize),
+) -> anyhow::Result<Outcome> {
+    let mut latencies = Vec::with_capacity(graph.len());
+    let mut checked = Vec::new();
+    let start = Instant::now();
+    for (k, (id, edges)) in stream(graph).iter().enumerate() {
+        latencies.extend(sink.keyframe(k, *id, edges)?);
+        if checkpoints.contains(&k) {
+            latencies.extend(sink.drain()?);
+            let by_id = sink.poses()?;
+            let poses = graph.keyframes()[..=k]
+                .iter()
+                .map(|kf| by_id.get(&kf.id).copied())
+                .collect::<Option<Vec<_>>>();
+            checked.push((k, poses.context("a snapshot lacks keyframes it should hold")?));
+        }
+        progress(k);
+    }
+    latencies.extend(sink.drain()?);
+    let (by_id, resolves) = sink.finish()?;
+    let total_s = start.elapsed().as_secs_f64();
+    let poses = graph
+        .keyframes()
+        .iter()
+        .map(|k| by_id.get(&k.id).copied())
+        .collect::<Option<Vec<_>>>()
+        .with_context(|| {
+            format!(
+                "{} keyframes are missing from the final snapshot",
+                graph.len() - by_id.len()
+            )
+        })?;
+    latencies.sort_by_key(|&(k, _)| k);
+    Ok(Outcome {
+        trace: latencies.clone(),
+        latencies: latencies.into_iter().map(|(_, l)| l).collect(),
+        total_s,
+        resolves,
+        poses,
+        checked,
+    })
 }
 
 pub fn run(opts: ReplayOpts) -> anyhow::Result<()> {
-    anyhow::ensure!(opts.embedded, "only --embedded replay exists so far");
+    let config = crate::run::load_config(opts.config.as_deref(), opts.namespace.as_deref())?;
     let graph = io::read_graph(&opts.file)?;
     graph.check_connected()?;
     let truth = opts
@@ -92,124 +386,73 @@ pub fn run(opts: ReplayOpts) -> anyhow::Result<()> {
         .as_deref()
         .map(io::read_ground_truth)
         .transpose()?;
-    let mut config = EngineConfig::default();
-    if let Some(n) = opts.resolve_every {
-        config.resolve_every_edges = n;
-    }
-    if let Some(r) = opts.recent_last {
-        config.recent_last = r;
-    }
-    if let Some(d) = opts.defer_chi2 {
-        config.defer_chi2 = d;
-    }
-    if let Some(s) = opts.snapshot {
-        config.snapshot = s;
-    }
-    let groups = edges_by_keyframe(&graph);
     let checkpoints: Vec<usize> = (1..=opts.check_prefixes)
         .map(|i| (i * graph.len() / (opts.check_prefixes + 1)).max(1))
         .collect();
-    let mut checked = Vec::new();
-
-    let mut engine = Engine::new(config);
-    let mut latencies = Vec::with_capacity(graph.len());
-    let mut trace = Vec::new();
-    let start = Instant::now();
-    for (k, group) in groups.iter().enumerate() {
-        engine.add_keyframe(graph.id_of(k), None)?;
-        let arrival = Instant::now();
-        for &e in group {
-            let edge = graph.edges()[e];
-            engine.add_edge(EdgeInput::new(
-                graph.id_of(edge.from),
-                graph.id_of(edge.to),
-                edge.measurement,
-                edge.information,
-                edge.kind,
-            ))?;
+    let mut sink: Box<dyn Sink> = if opts.embedded {
+        Box::new(EmbeddedSink(Engine::new(engine_config(&opts, &config))))
+    } else {
+        if opts.rate.is_some_and(|r| r.is_nan() || r <= 0.0) {
+            bail!("--rate must be > 0");
         }
-        let report = engine.update();
-        let latency = arrival.elapsed().as_secs_f64() * 1e6;
-        if !group.is_empty() {
-            latencies.push(latency);
-        }
-        if opts.trace.is_some() {
-            trace.push(format!(
-                "{k} {} {latency:.1} {} {}",
-                report.chi2,
-                report.moved,
-                u8::from(report.resolved)
-            ));
-        }
-        if checkpoints.contains(&k) {
-            let poses: Vec<_> = engine.snapshot().poses().map(|(_, p)| p).collect();
-            checked.push((k, report.chi2, poses));
-        }
-    }
-    let stream_seconds = start.elapsed().as_secs_f64();
+        Box::new(DaemonSink::connect(
+            &config.namespace,
+            &config,
+            Duration::from_secs_f64(opts.timeout),
+            opts.rate,
+        )?)
+    };
+    let out = replay(&graph, sink.as_mut(), &checkpoints, |_| {})?;
     if let Some(path) = &opts.trace {
-        std::fs::write(path, trace.join("\n") + "\n")
+        let lines: Vec<String> = out.trace.iter().map(|(k, l)| format!("{k} {l:.1}")).collect();
+        std::fs::write(path, lines.join("\n") + "\n")
             .with_context(|| format!("writing {}", path.display()))?;
     }
-    let final_report = engine.resolve_now();
-    let total = start.elapsed().as_secs_f64();
-    let latency_sum: f64 = latencies.iter().sum::<f64>() * 1e-6;
-    let poses: Vec<_> = engine.snapshot().poses().map(|(_, p)| p).collect();
-    anyhow::ensure!(
-        poses.len() == graph.len(),
-        "{} keyframes never joined the map",
-        graph.len() - poses.len()
-    );
-    let final_chi2 = chi2(&graph, &poses);
+    let final_chi2 = chi2(&graph, &out.poses);
     let ate = truth
         .as_ref()
-        .and_then(|t| slamd::eval::ate(&graph, &poses, t))
+        .and_then(|t| slamd::eval::ate(&graph, &out.poses, t))
         .map(|a| a.rmse);
-    let lat = Latency::of(latencies);
-    let stats = engine.stats();
-
-    // each checked snapshot against the optimum of its own prefix
-    let mut worst_ratio: Option<f64> = None;
-    for (k, snap_chi2, snap_poses) in &checked {
-        let prefix = graph.prefix(k + 1);
-        let best = solve_batch(
-            &prefix,
-            &BatchOptions {
-                polish: true,
-                ..Default::default()
-            },
-        )
-        .with_context(|| format!("batch solve of the first {} keyframes", k + 1))?;
-        let ratio = chi2(&prefix, snap_poses) / best.chi2.max(f64::MIN_POSITIVE);
-        tracing::debug!(k, snap_chi2, optimum = best.chi2, ratio, "Prefix checked.");
-        worst_ratio = Some(worst_ratio.map_or(ratio, |w: f64| w.max(ratio)));
-    }
-
+    let worst_ratio = out
+        .checked
+        .iter()
+        .map(|(k, poses)| {
+            let prefix = graph.prefix(k + 1);
+            let best = solve_batch(
+                &prefix,
+                &BatchOptions {
+                    polish: true,
+                    ..Default::default()
+                },
+            )?;
+            Ok(chi2(&prefix, poses) / best.chi2.max(f64::MIN_POSITIVE))
+        })
+        .collect::<anyhow::Result<Vec<f64>>>()?
+        .into_iter()
+        .fold(None, |w: Option<f64>, r| Some(w.map_or(r, |w| w.max(r))));
+    let lat = Latency::of(out.latencies);
     if opts.json {
         let v = serde_json::json!({
             "file": opts.file.display().to_string(),
-            "mode": "embedded",
+            "mode": sink.mode(),
             "keyframes": graph.len(),
             "edges": graph.edges().len(),
             "p50_us": lat.p50,
             "p99_us": lat.p99,
             "max_us": lat.max,
-            "total_s": total,
-            "resolves": stats.resolves,
-            "resolve_seconds": stats.resolve_seconds,
-            "stream_seconds": stream_seconds,
-            "latency_sum_s": latency_sum,
+            "total_s": out.total_s,
+            "resolves": out.resolves,
             "chi2": final_chi2,
-            "engine_chi2": final_report.chi2,
             "ate": ate,
-            "prefixes_checked": checked.len(),
+            "prefixes_checked": out.checked.len(),
             "worst_prefix_ratio": worst_ratio,
         });
         println!("{v}");
     } else {
         println!(
-            "{} (embedded): {} keyframes, {} edges",
+            "{} ({}): {} keyframes, {} edges",
             file_name(&opts.file),
+            sink.mode(),
             graph.len(),
             graph.edges().len()
         );
@@ -218,8 +461,8 @@ pub fn run(opts: ReplayOpts) -> anyhow::Result<()> {
             lat.p50, lat.p99, lat.max
         );
         println!(
-            "total                 {total:.3} s  ({} re-solves, {:.2} s on the re-solve thread)",
-            stats.resolves, stats.resolve_seconds
+            "total                 {:.3} s  ({} re-solves)",
+            out.total_s, out.resolves
         );
         println!("final chi2            {final_chi2:.3}");
         if let Some(a) = ate {
@@ -228,17 +471,26 @@ pub fn run(opts: ReplayOpts) -> anyhow::Result<()> {
         if let Some(w) = worst_ratio {
             println!(
                 "worst snapshot/prefix-optimum chi2 over {} prefixes: {w:.4}",
-                checked.len()
+                out.checked.len()
             );
         }
     }
     Ok(())
 }
 
-fn parse_source(s: &str) -> Result<SnapshotSource, String> {
-    match s {
-        "linear" => Ok(SnapshotSource::Linear),
-        "gauss-newton" => Ok(SnapshotSource::GaussNewton),
-        _ => Err(format!("unknown snapshot source `{s}` (linear, gauss-newton)")),
+fn engine_config(opts: &ReplayOpts, config: &Config) -> EngineConfig {
+    let mut c = config.engine.clone();
+    if let Some(n) = opts.resolve_every {
+        c.resolve_every_edges = n;
     }
+    if let Some(s) = opts.snapshot {
+        c.snapshot = s;
+    }
+    if let Some(d) = opts.defer_chi2 {
+        c.defer_chi2 = d;
+    }
+    if let Some(r) = opts.recent_last {
+        c.recent_last = r;
+    }
+    c
 }
