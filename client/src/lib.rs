@@ -1,1 +1,46 @@
+//! What a frontend links to use slamd.
+//!
+//! - [`Frontend`] publishes keyframes and edges to a running daemon over
+//!   shared memory; [`Snapshots`] reads the daemon's pose snapshots in
+//!   place (blocking [`wait`](Snapshots::wait) or non-blocking
+//!   [`latest`](Snapshots::latest)) and its rejections.
+//! - [`Embedded`] is the same [`Publish`] API on an engine in this process,
+//!   for applications that embed slamd instead of talking to a daemon.
+//!
+//! ```
+//! use slamd_client::{Config, EdgeInput, EdgeKind, Frontend, Information, Pose2, Publish, Server, Snapshots};
+//! use std::time::Duration;
+//!
+//! // A daemon on a thread of this process (in production: `slamd run`).
+//! let config = Config { namespace: format!("doc-client-{}", std::process::id()), ..Config::default() };
+//! let server = Server::spawn(config.clone()).unwrap();
+//!
+//! let snapshots = Snapshots::open(&config.namespace).unwrap();
+//! let mut frontend = Frontend::connect(&config).unwrap();
+//! frontend.add_keyframe(0, 0, None).unwrap();
+//! frontend.add_keyframe(1, 0, None).unwrap();
+//! let step = EdgeInput::new(0, 1, Pose2::new(1.0, 0.0, 0.0), Information::identity(), EdgeKind::Odometry);
+//! frontend.add_edge(&step).unwrap();
+//! frontend.flush().unwrap();
+//!
+//! let snap = snapshots.wait(Duration::from_secs(5)).unwrap().expect("a snapshot");
+//! assert_eq!(snap.header().keyframes, 2);
+//! let p1 = snap.poses().iter().find(|p| p.id == 1).unwrap();
+//! assert!((p1.x - 1.0).abs() < 1e-12);
+//! drop(snap);
+//! server.join().unwrap();
+//! ```
 
+#![deny(missing_docs)]
+
+mod embedded;
+mod publish;
+
+pub use embedded::Embedded;
+pub use publish::{ClientError, Publish};
+pub use slamd::config::Config;
+pub use slamd::engine::{EdgeInput, EngineConfig, Snapshot};
+pub use slamd::geometry::Pose2;
+pub use slamd::graph::{EdgeKind, Information, KeyframeId};
+pub use slamd::ipc::{Frontend, Server, SnapshotSample, Snapshots, TransportError};
+pub use slamd_protocol::{Pose, Rejection, RejectionReason, SnapshotHeader};

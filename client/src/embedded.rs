@@ -1,0 +1,80 @@
+//! [`Embedded`]: slamd in this process, no daemon.
+
+use crate::publish::{ClientError, Publish};
+use slamd::config::Config;
+use slamd::engine::{EdgeInput, Engine, Snapshot, UpdateReport};
+use slamd::geometry::Pose2;
+use slamd::graph::KeyframeId;
+
+/// The engine behind the [`Publish`] API, in this process.
+///
+/// ```
+/// use slamd_client::{Config, EdgeInput, EdgeKind, Embedded, Information, Pose2, Publish};
+///
+/// let mut slam = Embedded::new(&Config::default());
+/// let step = Pose2::new(1.0, 0.0, std::f64::consts::FRAC_PI_2);
+/// for id in 0..4u64 {
+///     slam.add_keyframe(id, 0, None).unwrap();
+///     if id > 0 {
+///         slam.add_edge(&EdgeInput::new(id - 1, id, step, Information::identity(), EdgeKind::Odometry)).unwrap();
+///     }
+///     slam.flush().unwrap();
+/// }
+/// slam.add_edge(&EdgeInput::new(3, 0, step, Information::identity(), EdgeKind::LoopClosure)).unwrap();
+/// slam.flush().unwrap();
+/// let snap = slam.snapshot();
+/// assert_eq!(snap.len(), 4);
+/// assert!(snap.chi2 < 1e-12);
+/// // an edge to a keyframe that does not exist is refused at once
+/// let bad = EdgeInput::new(3, 99, step, Information::identity(), EdgeKind::LoopClosure);
+/// assert!(slam.add_edge(&bad).is_err());
+/// ```
+pub struct Embedded {
+    engine: Engine,
+}
+
+impl Embedded {
+    /// An engine with `config.engine`.
+    pub fn new(config: &Config) -> Self {
+        Self {
+            engine: Engine::new(config.engine.clone()),
+        }
+    }
+
+    /// The current estimate.
+    pub fn snapshot(&self) -> Snapshot<'_> {
+        self.engine.snapshot()
+    }
+
+    /// Updates and returns what changed (what [`Publish::flush`] does).
+    pub fn update(&mut self) -> UpdateReport {
+        self.engine.update()
+    }
+
+    /// The engine itself, for reweights, re-solves and statistics.
+    pub fn engine(&mut self) -> &mut Engine {
+        &mut self.engine
+    }
+}
+
+impl Publish for Embedded {
+    fn add_keyframe(
+        &mut self,
+        id: KeyframeId,
+        _timestamp_ns: u64,
+        guess: Option<Pose2>,
+    ) -> Result<(), ClientError> {
+        self.engine.add_keyframe(id, guess)?;
+        Ok(())
+    }
+
+    fn add_edge(&mut self, edge: &EdgeInput) -> Result<(), ClientError> {
+        self.engine.add_edge(*edge)?;
+        Ok(())
+    }
+
+    fn flush(&mut self) -> Result<(), ClientError> {
+        self.engine.update();
+        Ok(())
+    }
+}

@@ -1,0 +1,82 @@
+//! [`Publish`]: the calls a frontend makes, whoever solves.
+
+use slamd::engine::{EdgeInput, EngineError};
+use slamd::geometry::Pose2;
+use slamd::graph::KeyframeId;
+use slamd::ipc::{Frontend, TransportError};
+use std::fmt;
+
+/// A failed call: the transport (daemon) or the engine (embedded) refused.
+#[derive(Debug)]
+pub enum ClientError {
+    /// Publishing to the daemon failed.
+    Transport(TransportError),
+    /// The in-process engine refused the change.
+    Engine(EngineError),
+}
+
+impl fmt::Display for ClientError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            ClientError::Transport(e) => e.fmt(f),
+            ClientError::Engine(e) => e.fmt(f),
+        }
+    }
+}
+
+impl std::error::Error for ClientError {}
+
+impl From<TransportError> for ClientError {
+    fn from(e: TransportError) -> Self {
+        ClientError::Transport(e)
+    }
+}
+
+impl From<EngineError> for ClientError {
+    fn from(e: EngineError) -> Self {
+        ClientError::Engine(e)
+    }
+}
+
+/// Keyframes and edges in, a new snapshot at each flush. Implemented by
+/// [`Frontend`] (a daemon over shared memory) and
+/// [`Embedded`](crate::Embedded) (an engine in this process), so a frontend
+/// can be written once for both.
+///
+/// A daemon checks what it receives asynchronously and reports refusals on
+/// its rejection topic; an embedded engine refuses at once, in the `Err`.
+pub trait Publish {
+    /// A new keyframe, with an initial guess in the map frame if known.
+    fn add_keyframe(
+        &mut self,
+        id: KeyframeId,
+        timestamp_ns: u64,
+        guess: Option<Pose2>,
+    ) -> Result<(), ClientError>;
+    /// A new edge between keyframes (which may arrive later, for a daemon).
+    fn add_edge(&mut self, edge: &EdgeInput) -> Result<(), ClientError>;
+    /// Marks the end of a batch: the solver takes it in and publishes.
+    fn flush(&mut self) -> Result<(), ClientError>;
+}
+
+impl Publish for Frontend {
+    fn add_keyframe(
+        &mut self,
+        id: KeyframeId,
+        timestamp_ns: u64,
+        guess: Option<Pose2>,
+    ) -> Result<(), ClientError> {
+        Frontend::add_keyframe(self, id, timestamp_ns, guess)?;
+        Ok(())
+    }
+
+    fn add_edge(&mut self, edge: &EdgeInput) -> Result<(), ClientError> {
+        Frontend::add_edge(self, edge)?;
+        Ok(())
+    }
+
+    fn flush(&mut self) -> Result<(), ClientError> {
+        Frontend::flush(self)?;
+        Ok(())
+    }
+}
