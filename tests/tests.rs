@@ -2,5 +2,6 @@
 
 mod accuracy;
 mod cli;
+mod daemon;
 mod formulations;
 mod incremental;

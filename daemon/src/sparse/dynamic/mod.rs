@@ -4,7 +4,7 @@
 //! faer 0.24 factorises from scratch only; this module adds what an online
 //! solver needs:
 //! - [`DynamicLdlt::append`] adds a variable as the last column;
-//! - [`update`](DynamicLdlt::rank1) applies `A ← A ± w wᴴ` by Davis and
+//! - [`update`](DynamicLdlt::rank_k_with) applies `A ← A ± w wᴴ` by Davis and
 //!   Hager's row modification, touching only the elimination-tree path of
 //!   `w` and growing the pattern along it;
 //! - [`IncrementalCholesky`] keeps `x = A⁻¹ b` current after such changes,

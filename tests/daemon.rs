@@ -1,0 +1,447 @@
+//! The real `slamd` binary as a daemon, talked to through the client over
+//! shared memory (issue 4).
+
+use slamd_client::{
+    Config, EdgeInput, EdgeKind, Embedded, EngineConfig, Frontend, Information, Pose2, Publish,
+    RejectionReason, Snapshots,
+};
+use slamd_protocol::{Edge, PROTOCOL_VERSION};
+use slamd_tests::{read, slamd_bin};
+use std::collections::HashMap;
+use std::process::{Child, Command, ExitStatus, Stdio};
+use std::time::{Duration, Instant};
+
+/// A `slamd run` child on its own namespace.
+struct Daemon {
+    child: Child,
+    namespace: String,
+}
+
+impl Daemon {
+    fn start(name: &str, env: &[(&str, &str)]) -> Daemon {
+        let namespace = format!("slamd-test-{}-{name}", std::process::id());
+        let mut cmd = Command::new(slamd_bin());
+        cmd.args(["run", "--namespace", &namespace])
+            .env("SLAMD_LOG", "error")
+            .stdin(Stdio::null());
+        for (k, v) in env {
+            cmd.env(k, v);
+        }
+        let child = cmd.spawn().expect("start slamd run");
+        let deadline = Instant::now() + Duration::from_secs(20);
+        while Snapshots::open(&namespace).is_err() {
+            assert!(Instant::now() < deadline, "daemon `{namespace}` did not come up");
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        Daemon { child, namespace }
+    }
+
+    fn config(&self) -> Config {
+        Config {
+            namespace: self.namespace.clone(),
+            ..Config::default()
+        }
+    }
+
+    fn signal(mut self, sig: i32) -> ExitStatus {
+        // SAFETY: kill(2) on our own child.
+        unsafe { libc::kill(self.child.id() as i32, sig) };
+        let status = self.child.wait().expect("wait for the daemon");
+        std::mem::forget(self);
+        status
+    }
+
+    fn stop(self) -> ExitStatus {
+        self.signal(libc::SIGTERM)
+    }
+}
+
+impl Drop for Daemon {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// Waits for a snapshot acknowledging `seq` from `frontend`; returns its
+/// poses by id and its header.
+fn wait_for_ack(
+    s: &Snapshots,
+    frontend: u32,
+    seq: u64,
+) -> (HashMap<u64, Pose2>, slamd_protocol::SnapshotHeader) {
+    let deadline = Instant::now() + Duration::from_secs(20);
+    loop {
+        if let Some(snap) = s.wait(Duration::from_millis(200)).expect("snapshot link") {
+            if snap.header().ack_of(frontend).is_some_and(|a| a >= seq) {
+                let poses = snap
+                    .poses()
+                    .iter()
+                    .map(|p| (p.id, Pose2::new(p.x, p.y, p.theta)))
+                    .collect();
+                return (poses, *snap.header());
+            }
+        }
+        assert!(
+            Instant::now() < deadline,
+            "no snapshot acknowledged {frontend}:{seq}"
+        );
+    }
+}
+
+fn walk(n: usize) -> Vec<Pose2> {
+    let mut p = vec![Pose2::IDENTITY];
+    for k in 1..n {
+        let last = p[k - 1];
+        p.push(last.compose(&Pose2::new(1.0, 0.1 * (k % 3) as f64, 0.3)));
+    }
+    p
+}
+
+fn exact(truth: &[Pose2], i: usize, j: usize, kind: EdgeKind) -> EdgeInput {
+    EdgeInput::new(
+        i as u64,
+        j as u64,
+        truth[i].between(&truth[j]),
+        Information::identity(),
+        kind,
+    )
+}
+
+fn close(got: &HashMap<u64, Pose2>, truth: &[Pose2], tol: f64) {
+    assert_eq!(got.len(), truth.len());
+    for (k, t) in truth.iter().enumerate() {
+        let g = got[&(k as u64)];
+        assert!(
+            (g.x - t.x).abs() < tol && (g.y - t.y).abs() < tol,
+            "keyframe {k}: {g:?} vs {t:?}"
+        );
+    }
+}
+
+#[test]
+fn two_frontends_interleave_edges() {
+    let daemon = Daemon::start("two", &[]);
+    let truth = walk(40);
+    let mut odometry = Frontend::connect(&daemon.config()).unwrap();
+    let mut closures = Frontend::connect(&daemon.config()).unwrap();
+    let snaps = Snapshots::open(&daemon.namespace).unwrap();
+    let mut loops = 0;
+    for k in 0..truth.len() {
+        odometry.add_keyframe(k as u64, 0, None).unwrap();
+        if k > 0 {
+            odometry
+                .add_edge(&exact(&truth, k - 1, k, EdgeKind::Odometry))
+                .unwrap();
+        }
+        odometry.flush().unwrap();
+        if k >= 10 && k % 4 == 0 {
+            // the other frontend may outrun the odometry: the daemon holds it
+            closures
+                .add_edge(&exact(&truth, k - 10, k, EdgeKind::LoopClosure))
+                .unwrap();
+            closures.flush().unwrap();
+            loops += 1;
+        }
+    }
+    let _ = wait_for_ack(&snaps, closures.id(), closures.last_sequence());
+    let (poses, header) = wait_for_ack(&snaps, odometry.id(), odometry.last_sequence());
+    assert_eq!(
+        (header.keyframes, header.edges, header.rejected),
+        (40, 39 + loops, 0)
+    );
+    close(&poses, &truth, 1e-6);
+    assert!(header.chi2 < 1e-9, "{}", header.chi2);
+    assert!(snaps.rejections().unwrap().is_empty());
+    assert!(daemon.stop().success());
+}
+
+#[test]
+fn hostile_stream_gets_clean_rejections_while_valid_data_flows() {
+    let daemon = Daemon::start(
+        "hostile",
+        &[("SLAMD_HELD_TIMEOUT_S", "0.3"), ("SLAMD_IPC__TICK_MS", "50")],
+    );
+    let truth = walk(12);
+    let mut f = Frontend::connect(&daemon.config()).unwrap();
+    let snaps = Snapshots::open(&daemon.namespace).unwrap();
+    let mut expected: Vec<(RejectionReason, u64)> = Vec::new();
+    let good = |k: usize| exact(&truth, k - 1, k, EdgeKind::Odometry);
+    let raw = |k: usize| {
+        let e = exact(&truth, k - 1, k, EdgeKind::LoopClosure);
+        Edge {
+            from: e.from,
+            to: e.to,
+            dx: e.measurement.x,
+            dy: e.measurement.y,
+            dtheta: e.measurement.theta,
+            information: e.information.upper(),
+            kind: 1,
+            frontend: 0,
+            sequence: 0,
+            protocol: PROTOCOL_VERSION,
+            reserved: 0,
+        }
+    };
+    for k in 0..truth.len() {
+        f.add_keyframe(k as u64, 0, None).unwrap();
+        if k > 0 {
+            f.add_edge(&good(k)).unwrap();
+        }
+        let bad = match k {
+            2 => Some((
+                RejectionReason::NonFinite,
+                Edge {
+                    dx: f64::NAN,
+                    ..raw(k)
+                },
+            )),
+            3 => Some((
+                RejectionReason::NotPositiveDefinite,
+                Edge {
+                    information: [1.0, 3.0, 0.0, 1.0, 0.0, 1.0],
+                    ..raw(k)
+                },
+            )),
+            4 => Some((RejectionReason::BadKind, Edge { kind: 77, ..raw(k) })),
+            5 => Some((
+                RejectionReason::ProtocolVersion,
+                Edge {
+                    protocol: PROTOCOL_VERSION + 1,
+                    ..raw(k)
+                },
+            )),
+            6 => Some((
+                RejectionReason::SelfEdge,
+                Edge {
+                    to: 6,
+                    from: 6,
+                    ..raw(k)
+                },
+            )),
+            7 => Some((RejectionReason::UnknownKeyframe, Edge { to: 999, ..raw(k) })),
+            8 => Some((
+                RejectionReason::NonFinite,
+                Edge {
+                    information: [f64::INFINITY; 6],
+                    ..raw(k)
+                },
+            )),
+            _ => None,
+        };
+        if let Some((reason, msg)) = bad {
+            let seq = f.send_raw_edge(msg).unwrap();
+            expected.push((reason, seq));
+        }
+        if k == 9 {
+            let seq = f.add_keyframe(3, 0, None).unwrap(); // duplicate
+            expected.push((RejectionReason::DuplicateKeyframe, seq));
+        }
+        f.flush().unwrap();
+    }
+    let (poses, header) = wait_for_ack(&snaps, f.id(), f.last_sequence());
+    close(&poses, &truth, 1e-6);
+    // the held edge to keyframe 999 is rejected once its wait runs out
+    let deadline = Instant::now() + Duration::from_secs(10);
+    let mut got = Vec::new();
+    while got.len() < expected.len() && Instant::now() < deadline {
+        got.extend(snaps.rejections().unwrap());
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let mut got: Vec<(RejectionReason, u64)> = got.iter().map(|r| (r.reason(), r.sequence)).collect();
+    got.sort_by_key(|g| g.1);
+    expected.sort_by_key(|e| e.1);
+    assert_eq!(got, expected);
+    assert!(header.rejected >= 7, "{header:?}");
+    // and the daemon still takes valid input afterwards
+    f.add_keyframe(100, 0, None).unwrap();
+    let seq = f
+        .add_edge(&EdgeInput::new(
+            11,
+            100,
+            Pose2::new(1.0, 0.0, 0.0),
+            Information::identity(),
+            EdgeKind::Odometry,
+        ))
+        .unwrap();
+    f.flush().unwrap();
+    let (poses, header) = wait_for_ack(&snaps, f.id(), seq);
+    assert_eq!(poses.len(), 13);
+    assert_eq!(header.rejected, 8);
+    assert!(daemon.stop().success());
+}
+
+#[test]
+fn a_killed_frontend_is_survived_and_a_new_one_continues() {
+    let daemon = Daemon::start("killed", &[("SLAMD_IPC__TICK_MS", "50")]);
+    let dir = std::env::temp_dir().join(format!("slamd-killed-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let world = dir.join("world.g2o");
+    let out = Command::new(slamd_bin())
+        .args([
+            "synth",
+            "--poses",
+            "3000",
+            "--out",
+            world.to_str().unwrap(),
+            "--truth",
+            dir.join("t.txt").to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    let mut replayer = Command::new(slamd_bin())
+        .args([
+            "replay",
+            world.to_str().unwrap(),
+            "--namespace",
+            &daemon.namespace,
+            "--rate",
+            "500",
+        ])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let snaps = Snapshots::open(&daemon.namespace).unwrap();
+    // let it get some way, then kill it without a chance to clean up
+    let deadline = Instant::now() + Duration::from_secs(20);
+    loop {
+        let snap = snaps.wait(Duration::from_millis(200)).unwrap();
+        if snap.is_some_and(|s| s.header().keyframes >= 200) {
+            break;
+        }
+        assert!(Instant::now() < deadline, "the replay frontend made no progress");
+    }
+    replayer.kill().unwrap();
+    replayer.wait().unwrap();
+    std::thread::sleep(Duration::from_millis(300));
+    let latest = snaps
+        .wait(Duration::from_secs(1))
+        .unwrap()
+        .or(snaps.latest().unwrap());
+    let last = latest
+        .map(|s| s.poses().iter().map(|p| p.id).max().unwrap())
+        .unwrap_or_else(|| {
+            let s = snaps.wait(Duration::from_secs(5)).unwrap().expect("a snapshot");
+            s.poses().iter().map(|p| p.id).max().unwrap()
+        });
+    // a new frontend continues the map from the last keyframe
+    let mut f = Frontend::connect(&daemon.config()).unwrap();
+    let mut seq = 0;
+    for k in last + 1..last + 20 {
+        f.add_keyframe(k, 0, None).unwrap();
+        seq = f
+            .add_edge(&EdgeInput::new(
+                k - 1,
+                k,
+                Pose2::new(1.0, 0.0, 0.0),
+                Information::identity(),
+                EdgeKind::Odometry,
+            ))
+            .unwrap();
+        f.flush().unwrap();
+    }
+    let (poses, header) = wait_for_ack(&snaps, f.id(), seq);
+    assert!(poses.contains_key(&(last + 19)), "new keyframes missing");
+    assert_eq!(header.rejected, 0);
+    assert!(daemon.stop().success());
+}
+
+#[test]
+fn daemon_snapshots_equal_the_embedded_engine() {
+    // deterministic engine on both sides: inline re-solves, no idle work
+    let env = [
+        ("SLAMD_ENGINE__BACKGROUND", "false"),
+        ("SLAMD_IPC__TICK_MS", "600000"),
+    ];
+    let daemon = Daemon::start("equal", &env);
+    let graph = read("intel_sesync.g2o").prefix(400);
+    let mut groups = vec![Vec::new(); graph.len()];
+    for e in graph.time_order() {
+        groups[graph.edges()[e].newer()].push(e);
+    }
+    let mut f = Frontend::connect(&daemon.config()).unwrap();
+    let snaps = Snapshots::open(&daemon.namespace).unwrap();
+    let config = Config {
+        engine: EngineConfig {
+            background: false,
+            ..EngineConfig::default()
+        },
+        ..Config::default()
+    };
+    let mut embedded = Embedded::new(&config);
+    let mut from_daemon = HashMap::new();
+    for (k, group) in groups.iter().enumerate() {
+        for side in [&mut f as &mut dyn Publish, &mut embedded as &mut dyn Publish] {
+            side.add_keyframe(graph.id_of(k), 0, None).unwrap();
+            for &e in group {
+                let edge = graph.edges()[e];
+                let input = EdgeInput::new(
+                    graph.id_of(edge.from),
+                    graph.id_of(edge.to),
+                    edge.measurement,
+                    edge.information,
+                    edge.kind,
+                );
+                side.add_edge(&input).unwrap();
+            }
+            side.flush().unwrap();
+        }
+        // lockstep: one batch, one update per keyframe on both sides
+        from_daemon = wait_for_ack(&snaps, f.id(), f.last_sequence()).0;
+    }
+    let snap = embedded.snapshot();
+    assert_eq!(from_daemon.len(), snap.len());
+    for (id, p) in snap.poses() {
+        let d = from_daemon[&id];
+        assert!(
+            (d.x - p.x).abs() < 1e-12 && (d.y - p.y).abs() < 1e-12 && (d.theta - p.theta).abs() < 1e-12,
+            "keyframe {id}: daemon {d:?} vs embedded {p:?}"
+        );
+    }
+    assert!(
+        daemon.signal(libc::SIGINT).success(),
+        "SIGINT must stop the daemon cleanly too"
+    );
+}
+
+#[test]
+fn replay_without_a_daemon_says_so_quickly() {
+    let start = Instant::now();
+    let out = Command::new(slamd_bin())
+        .args([
+            "replay",
+            slamd_tests::dataset("ring.g2o").to_str().unwrap(),
+            "--namespace",
+            "slamd-test-nobody-home",
+        ])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("no slamd daemon serves namespace `slamd-test-nobody-home`"),
+        "{err}"
+    );
+    assert!(start.elapsed() < Duration::from_secs(5));
+}
+
+#[test]
+fn a_daemon_that_cannot_fit_its_pools_refuses_to_start() {
+    let out = Command::new(slamd_bin())
+        .args([
+            "run",
+            "--namespace",
+            &format!("slamd-test-{}-huge", std::process::id()),
+        ])
+        .env("SLAMD_IPC__INITIAL_POSES", "100000000000")
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("/dev/shm has") && err.contains("enlarge /dev/shm"),
+        "{err}"
+    );
+}
