@@ -150,13 +150,6 @@ pub struct EngineConfig {
     /// linearisation point is too far from the estimate, as after a large
     /// loop closure (0: never).
     pub nonlinear_ratio: f64,
-    /// Defer a loop closure's Gauss–Newton update to the next
-    /// refactorisation when its χ² at the current estimate is at most this
-    /// (0: never). It still counts in the published χ² at its residual.
-    pub defer_chi2: f64,
-    /// Apply every deferred edge at once when their χ² exceeds this
-    /// fraction of the estimate's χ².
-    pub defer_budget: f64,
     /// Keyframes kept last in a fresh ordering.
     pub recent_last: usize,
     /// What the published estimate is between re-solves.
@@ -176,8 +169,6 @@ impl Default for EngineConfig {
             background: true,
             wildfire_threshold: 1e-4,
             nonlinear_ratio: 1.5,
-            defer_chi2: 0.0,
-            defer_budget: 0.05,
             recent_last: 32,
             snapshot: SnapshotSource::default(),
             linear_stages: false,
@@ -230,10 +221,8 @@ pub struct Engine {
 impl Engine {
     /// An empty engine.
     pub fn new(config: EngineConfig) -> Self {
-        let mut state = State::new(config.snapshot, config.linear_stages);
-        state.set_deferral(config.defer_chi2);
         Self {
-            state,
+            state: State::new(config.snapshot, config.linear_stages),
             config,
             job: None,
             log: Vec::new(),
@@ -302,17 +291,6 @@ impl Engine {
     pub fn update(&mut self) -> UpdateReport {
         let mut resolved = self.poll_job();
         let mut moved = self.solve();
-        let budget = self.config.defer_budget * self.state.chi2();
-        if self.state.deferred_chi2() > 4.0 * budget {
-            // too much left out to wait for a re-solve
-            match self.state.apply_deferred() {
-                Ok(n) => tracing::debug!(edges = n, "Deferred edges applied."),
-                Err(_) => self.rebuild_inline(false),
-            }
-            moved = moved.max(self.solve());
-        } else if self.state.deferred_chi2() > budget && self.job.is_none() {
-            self.start_resolve();
-        }
         if self.nonlinear() {
             self.stats.nonlinear_resolves += 1;
             tracing::debug!(
@@ -511,10 +489,9 @@ impl Engine {
 }
 
 impl Engine {
-    /// Records the fresh factor's size and carries the deferral rule over.
+    /// Records the fresh factor's size.
     fn after_resolve(&mut self) {
         self.nnz_after_resolve = self.state.factor_nnz();
-        self.state.set_deferral(self.config.defer_chi2);
     }
 }
 

@@ -94,7 +94,6 @@ pub fn run(model: Model, estimate: &[Pose2], config: &EngineConfig, ops: &Receiv
     );
     let mut last_seq = None;
     let state = state.map(|mut s| {
-        s.set_deferral(config.defer_chi2);
         // ops were validated by the foreground; a numeric failure here only
         // costs this re-solve its catch-up accuracy
         while let Ok((seq, op)) = ops.try_recv() {

@@ -51,9 +51,6 @@ pub struct Model {
     pub waiting: HashMap<usize, Vec<usize>>,
     /// Applied edges by keyframe.
     pub incident: Vec<Vec<u32>>,
-    /// Applied edges whose Gauss–Newton terms wait for the next
-    /// refactorisation (see [`State::set_deferral`]).
-    pub deferred: Vec<bool>,
     /// Edges received but not yet connected to the solvers (that happens at
     /// the next solve, odometry first).
     pub pending: Vec<usize>,
@@ -90,9 +87,6 @@ pub struct State {
     estimate: Vec<Pose2>,
     edge_chi2: Vec<f64>,
     chi2: f64,
-    /// χ² of the deferred edges, and the rule that defers them.
-    deferred_chi2: f64,
-    defer_below: f64,
     stamp: Vec<u32>,
     epoch: u32,
 }
@@ -111,21 +105,9 @@ impl State {
             estimate: Vec::new(),
             edge_chi2: Vec::new(),
             chi2: 0.0,
-            deferred_chi2: 0.0,
-            defer_below: 0.0,
             stamp: Vec::new(),
             epoch: 0,
         }
-    }
-
-    /// Loop closures whose χ² at the current estimate is at most `chi2`
-    /// (and which do not join a keyframe) go into the model, the exact
-    /// linear stages and the published χ² at once, but into the
-    /// Gauss–Newton factor only at the next refactorisation: the estimate
-    /// already satisfies them within their noise, and their rank-3 update
-    /// would cost a walk to the root of the factor. 0 defers nothing.
-    pub fn set_deferral(&mut self, chi2: f64) {
-        self.defer_below = chi2;
     }
 
     /// Applies one change. Nothing is stored when it is rejected.
@@ -158,7 +140,6 @@ impl State {
                 )?;
                 self.model.scale.push(1.0);
                 self.model.applied.push(false);
-                self.model.deferred.push(false);
                 self.edge_chi2.push(0.0);
                 self.model.pending.push(e);
                 Ok(())
@@ -190,12 +171,7 @@ impl State {
         self.model.scale[e] = scale;
         if self.model.applied[e] {
             if delta != 0.0 {
-                if !self.model.deferred[e] {
-                    self.contribute(e, delta)?;
-                } else if let Some(l) = &mut self.linear {
-                    let edge = self.model.graph.edges()[e];
-                    l.apply_edge(e, &edge, delta).map_err(EngineError::Numeric)?;
-                }
+                self.contribute(e, delta)?;
                 self.refresh_edge(e);
             }
             Ok(())
@@ -233,14 +209,8 @@ impl State {
             }
             let edge = self.model.graph.edges()[e];
             let (i, j) = (edge.from, edge.to);
-            let mut defer = false;
             match (self.model.joined[i], self.model.joined[j]) {
-                (true, true) => {
-                    defer = self.defer_below > 0.0
-                        && self.gn.is_some()
-                        && edge.kind != EdgeKind::Odometry
-                        && self.model.scale[e] * edge_chi2(&edge, &self.estimate) <= self.defer_below;
-                }
+                (true, true) => {}
                 (false, false) => {
                     for k in [i, j] {
                         let list = self.model.waiting.entry(k).or_default();
@@ -277,12 +247,7 @@ impl State {
             self.model.incident[i].push(e as u32);
             self.model.incident[j].push(e as u32);
             let s = self.model.scale[e];
-            if defer {
-                self.model.deferred[e] = true;
-                if let Some(l) = &mut self.linear {
-                    l.apply_edge(e, &edge, s).map_err(EngineError::Numeric)?;
-                }
-            } else if s != 0.0 {
+            if s != 0.0 {
                 self.contribute(e, s)?;
             }
             self.refresh_edge(e);
@@ -321,35 +286,7 @@ impl State {
         let edge = &self.model.graph.edges()[e];
         let v = self.model.scale[e] * edge_chi2(edge, &self.estimate);
         self.chi2 += v - self.edge_chi2[e];
-        if self.model.deferred[e] {
-            self.deferred_chi2 += v - self.edge_chi2[e];
-        }
         self.edge_chi2[e] = v;
-    }
-
-    /// χ² of the deferred edges.
-    pub fn deferred_chi2(&self) -> f64 {
-        self.deferred_chi2
-    }
-
-    /// Puts every deferred edge into the Gauss–Newton factor now.
-    pub fn apply_deferred(&mut self) -> Result<usize, EngineError> {
-        let mut count = 0;
-        for e in 0..self.model.deferred.len() {
-            if self.model.deferred[e] {
-                self.model.deferred[e] = false;
-                let s = self.model.scale[e];
-                if s != 0.0 {
-                    let edge = self.model.graph.edges()[e];
-                    if let Some(gn) = &mut self.gn {
-                        gn.apply_edge(&edge, s).map_err(EngineError::Numeric)?;
-                    }
-                }
-                count += 1;
-            }
-        }
-        self.deferred_chi2 = 0.0;
-        Ok(count)
     }
 
     /// Brings the estimate up to date (see [`GaussNewton::solve`]) and the
@@ -411,10 +348,6 @@ impl State {
             };
         }
         self.chi2 = self.edge_chi2.iter().sum();
-        self.deferred_chi2 = (0..self.edge_chi2.len())
-            .filter(|&e| self.model.deferred[e])
-            .map(|e| self.edge_chi2[e])
-            .sum();
     }
 
     /// χ² of the estimate over the applied edges, with their weights.
@@ -459,8 +392,6 @@ impl State {
         linear: bool,
     ) -> Result<State, FactorError> {
         model.unjoin_unconstrained();
-        // everything goes into the fresh factor
-        model.deferred.iter_mut().for_each(|d| *d = false);
         let n = model.graph.len();
         let active: Vec<(usize, f64)> = (0..model.graph.edges().len())
             .filter(|&e| model.applied[e] && model.scale[e] > 0.0)
@@ -552,8 +483,6 @@ impl State {
             estimate,
             edge_chi2: vec![0.0; edges],
             chi2: 0.0,
-            deferred_chi2: 0.0,
-            defer_below: 0.0,
             epoch: 0,
         };
         state.recompute_chi2();

@@ -55,9 +55,6 @@ pub struct ReplayOpts {
     /// Snapshot source between re-solves (--embedded): linear or gauss-newton.
     #[arg(long, value_parser = parse_source)]
     pub snapshot: Option<SnapshotSource>,
-    /// Defer consistent loop closures below this χ² (--embedded).
-    #[arg(long)]
-    pub defer_chi2: Option<f64>,
     /// Keyframes kept last in a fresh ordering (--embedded).
     #[arg(long)]
     pub recent_last: Option<usize>,
@@ -485,9 +482,6 @@ fn engine_config(opts: &ReplayOpts, config: &Config) -> EngineConfig {
     }
     if let Some(s) = opts.snapshot {
         c.snapshot = s;
-    }
-    if let Some(d) = opts.defer_chi2 {
-        c.defer_chi2 = d;
     }
     if let Some(r) = opts.recent_last {
         c.recent_last = r;
