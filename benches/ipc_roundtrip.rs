@@ -123,7 +123,9 @@ fn unix_socket(session: usize, cpu: Option<usize>) -> Vec<f64> {
     let mut out = Vec::with_capacity(PER_SESSION);
     for k in 0..PER_SESSION {
         let t0 = Instant::now();
-        client.write_all(&[k as u8; std::mem::size_of::<slamd_protocol::Edge>()]).unwrap();
+        client
+            .write_all(&[k as u8; std::mem::size_of::<slamd_protocol::Edge>()])
+            .unwrap();
         let mut len = [0u8; 8];
         client.read_exact(&mut len).unwrap();
         client
