@@ -12,13 +12,13 @@ use std::process::{Child, Command, ExitStatus, Stdio};
 use std::time::{Duration, Instant};
 
 /// A `slamd run` child on its own namespace.
-struct Daemon {
+pub struct Daemon {
     child: Child,
-    namespace: String,
+    pub namespace: String,
 }
 
 impl Daemon {
-    fn start(name: &str, env: &[(&str, &str)]) -> Daemon {
+    pub fn start(name: &str, env: &[(&str, &str)]) -> Daemon {
         let namespace = format!("slamd-test-{}-{name}", std::process::id());
         let mut cmd = Command::new(slamd_bin());
         cmd.args(["run", "--namespace", &namespace])
@@ -36,7 +36,7 @@ impl Daemon {
         Daemon { child, namespace }
     }
 
-    fn config(&self) -> Config {
+    pub fn config(&self) -> Config {
         Config {
             namespace: self.namespace.clone(),
             ..Config::default()
@@ -51,7 +51,7 @@ impl Daemon {
         status
     }
 
-    fn stop(self) -> ExitStatus {
+    pub fn stop(self) -> ExitStatus {
         self.signal(libc::SIGTERM)
     }
 }

@@ -4,4 +4,5 @@ mod accuracy;
 mod cli;
 mod daemon;
 mod formulations;
+mod gps;
 mod incremental;

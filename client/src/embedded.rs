@@ -2,7 +2,7 @@
 
 use crate::publish::{ClientError, Publish};
 use slamd::config::Config;
-use slamd::engine::{EdgeInput, Engine, Snapshot, UpdateReport};
+use slamd::engine::{EdgeInput, Engine, FixInput, Snapshot, UpdateReport};
 use slamd::geometry::Pose2;
 use slamd::graph::KeyframeId;
 
@@ -37,7 +37,7 @@ impl Embedded {
     /// An engine with `config.engine`.
     pub fn new(config: &Config) -> Self {
         Self {
-            engine: Engine::new(config.engine.clone()),
+            engine: Engine::new(config.engine()),
         }
     }
 
@@ -70,6 +70,11 @@ impl Publish for Embedded {
 
     fn add_edge(&mut self, edge: &EdgeInput) -> Result<(), ClientError> {
         self.engine.add_edge(*edge)?;
+        Ok(())
+    }
+
+    fn add_gps(&mut self, fix: &FixInput) -> Result<(), ClientError> {
+        self.engine.add_gps(*fix)?;
         Ok(())
     }
 

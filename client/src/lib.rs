@@ -1,6 +1,6 @@
 //! What a frontend links to use slamd.
 //!
-//! - [`Frontend`] publishes keyframes and edges to a running daemon over
+//! - [`Frontend`] publishes keyframes, edges and GPS fixes to a running daemon over
 //!   shared memory; [`Snapshots`] reads the daemon's pose snapshots in
 //!   place (blocking [`wait`](Snapshots::wait) or non-blocking
 //!   [`latest`](Snapshots::latest)) and its rejections.
@@ -39,8 +39,9 @@ mod publish;
 pub use embedded::Embedded;
 pub use publish::{ClientError, Publish};
 pub use slamd::config::Config;
-pub use slamd::engine::{EdgeInput, EngineConfig, Snapshot};
+pub use slamd::engine::{EdgeInput, EngineConfig, FixInput, Snapshot};
 pub use slamd::geometry::Pose2;
+pub use slamd::gps::{Geodetic, GpsConfig};
 pub use slamd::graph::{EdgeKind, Information, KeyframeId};
 pub use slamd::ipc::{Frontend, Server, SnapshotSample, Snapshots, TransportError};
 pub use slamd_protocol::{Pose, Rejection, RejectionReason, SnapshotHeader};

@@ -1,6 +1,6 @@
 //! [`Publish`]: the calls a frontend makes, whoever solves.
 
-use slamd::engine::{EdgeInput, EngineError};
+use slamd::engine::{EdgeInput, EngineError, FixInput};
 use slamd::geometry::Pose2;
 use slamd::graph::KeyframeId;
 use slamd::ipc::{Frontend, TransportError};
@@ -38,7 +38,7 @@ impl From<EngineError> for ClientError {
     }
 }
 
-/// Keyframes and edges in, a new snapshot at each flush. Implemented by
+/// Keyframes, edges and GPS fixes in, a new snapshot at each flush. Implemented by
 /// [`Frontend`] (a daemon over shared memory) and
 /// [`Embedded`](crate::Embedded) (an engine in this process), so a frontend
 /// can be written once for both.
@@ -55,6 +55,8 @@ pub trait Publish {
     ) -> Result<(), ClientError>;
     /// A new edge between keyframes (which may arrive later, for a daemon).
     fn add_edge(&mut self, edge: &EdgeInput) -> Result<(), ClientError>;
+    /// A GPS fix taken at a keyframe (which may arrive later, for a daemon).
+    fn add_gps(&mut self, fix: &FixInput) -> Result<(), ClientError>;
     /// Marks the end of a batch: the solver takes it in and publishes.
     fn flush(&mut self) -> Result<(), ClientError>;
 }
@@ -72,6 +74,11 @@ impl Publish for Frontend {
 
     fn add_edge(&mut self, edge: &EdgeInput) -> Result<(), ClientError> {
         Frontend::add_edge(self, edge)?;
+        Ok(())
+    }
+
+    fn add_gps(&mut self, fix: &FixInput) -> Result<(), ClientError> {
+        Frontend::add_gps(self, fix)?;
         Ok(())
     }
 

@@ -27,11 +27,15 @@
 //! [snapshot]
 //! max_rate_hz = 0.0            # 0: one snapshot per processed batch
 //!
+//! [gps]                        # see slamd::gps::GpsConfig
+//! # origin = "45.5138,9.2110"  # ENU origin LAT,LON[,HEIGHT]; default: the first fix
+//!
 //! [engine]                     # see slamd::engine::EngineConfig
 //! resolve_every_edges = 1000
 //! ```
 
 use crate::engine::EngineConfig;
+use crate::gps::GpsConfig;
 use serde::{Deserialize, Serialize};
 use slamd_protocol::service::{Qos, DEFAULT_NAMESPACE};
 use std::fmt;
@@ -125,6 +129,8 @@ pub struct Config {
     pub snapshot: SnapshotConfig,
     /// The incremental engine.
     pub engine: EngineConfig,
+    /// GPS fixes: ENU origin, weighting, paper A's triangle rules.
+    pub gps: GpsConfig,
 }
 
 impl Default for Config {
@@ -137,11 +143,20 @@ impl Default for Config {
             ipc: IpcConfig::default(),
             snapshot: SnapshotConfig::default(),
             engine: EngineConfig::default(),
+            gps: GpsConfig::default(),
         }
     }
 }
 
 impl Config {
+    /// The engine's settings, with the `[gps]` section.
+    pub fn engine(&self) -> EngineConfig {
+        EngineConfig {
+            gps: self.gps.clone(),
+            ..self.engine.clone()
+        }
+    }
+
     /// Defaults, overridden by `file` (TOML) if given, then by `SLAMD_*`
     /// environment variables; validated.
     pub fn load(file: Option<&Path>) -> Result<Config, ConfigError> {

@@ -12,7 +12,8 @@
 //! information, the cost) → [`linear`] (initialisers without a guess: the
 //! two-stage formulation and paper A's virtual frames) → [`sparse`] (normal
 //! equations and faer's sparse Cholesky) → [`nonlinear`] (the
-//! Levenberg–Marquardt polish). [`solver`] chains them into a batch solve and
+//! Levenberg–Marquardt polish); [`gps`] adds fixes and georeferencing.
+//! [`solver`] chains them into a batch solve and
 //! [`eval`] measures the result.
 //!
 //! [`synthetic`] generates a seeded world with known ground truth.
@@ -53,6 +54,7 @@ pub mod config;
 pub mod engine;
 pub mod eval;
 pub mod geometry;
+pub mod gps;
 pub mod graph;
 pub mod io;
 pub mod ipc;

@@ -1,9 +1,10 @@
 //! The batch pipeline: a linear formulation, then optionally the polish.
 
 use crate::geometry::Pose2;
+use crate::gps::{variance_factor, Georef, GpsInput};
 use crate::graph::{chi2, GraphError, PoseGraph};
 use crate::linear::{two_stage, virtual_frame, Pivot};
-use crate::nonlinear::{polish, LevenbergMarquardtParams, LmReport};
+use crate::nonlinear::{polish, LevenbergMarquardtParams, LmReport, Problem};
 use crate::sparse::FactorError;
 use std::fmt;
 use std::str::FromStr;
@@ -95,7 +96,7 @@ impl From<FactorError> for SolveError {
 }
 
 /// Options of [`solve_batch`].
-#[derive(Clone, Copy, Debug, Default)]
+#[derive(Clone, Debug, Default)]
 pub struct BatchOptions {
     /// The linear formulation.
     pub formulation: Formulation,
@@ -103,6 +104,8 @@ pub struct BatchOptions {
     pub polish: bool,
     /// Polish parameters.
     pub lm: LevenbergMarquardtParams,
+    /// GPS fixes (keyframe indices of the graph being solved).
+    pub gps: Option<GpsInput>,
 }
 
 /// What [`solve_batch`] found.
@@ -124,6 +127,8 @@ pub struct BatchSolution {
     pub rho: Option<f64>,
     /// For the virtual-frame formulations: the median axis length at ρ = 1.
     pub median_axis_length: Option<f64>,
+    /// The map→ENU motion, when GPS was given (and had two distinct fixes).
+    pub georef: Option<Georef>,
 }
 
 impl BatchSolution {
@@ -137,26 +142,54 @@ impl BatchSolution {
 pub fn solve_batch(graph: &PoseGraph, options: &BatchOptions) -> Result<BatchSolution, SolveError> {
     graph.check_connected()?;
     let start = Instant::now();
-    let (mut rho, mut median_axis_length) = (None, None);
+    let gps = options.gps.as_ref().map(|g| calibrated(graph, g)).transpose()?;
+    let gps = gps.as_ref();
+    let (mut rho, mut median_axis_length, mut georef) = (None, None, None);
     let poses = match options.formulation {
-        Formulation::TwoStage => two_stage::solve(graph)?,
+        Formulation::TwoStage => match gps {
+            Some(gps) => {
+                let (poses, g) = two_stage::solve_gps(graph, gps)?;
+                georef = g;
+                poses
+            }
+            None => two_stage::solve(graph)?,
+        },
         Formulation::Odometry => graph.compose_spanning_tree()?,
         Formulation::VirtualFrame | Formulation::VirtualFramePivot => {
             let pivot = match options.formulation {
                 Formulation::VirtualFrame => Pivot::Printed,
                 _ => Pivot::AxisX,
             };
-            let s = virtual_frame::solve(graph, pivot)?;
+            let s = virtual_frame::solve_with(graph, pivot, gps)?;
             rho = Some(s.rho);
             median_axis_length = Some(s.median_axis_length);
             s.poses
         }
     };
+    if let (Some(gps), None) = (gps, georef) {
+        georef = gps.fit(&poses);
+    }
     let linear_seconds = start.elapsed().as_secs_f64();
     let linear_chi2 = chi2(graph, &poses);
     let (poses, polish_report, polish_seconds) = if options.polish {
         let start = Instant::now();
-        let report = polish(graph.edges(), poses, options.lm)?;
+        let mut report = polish(Problem::edges(graph.edges()), poses.clone(), options.lm)?;
+        if let Some(gps) = gps.filter(|g| g.absolute) {
+            // alternate: fit the georeference, polish with the fixes as
+            // priors in its map frame, refit
+            for _ in 0..2 {
+                let Some(g) = georef.or_else(|| gps.fit(&report.poses)) else {
+                    break;
+                };
+                let priors = gps.priors(&g);
+                let problem = Problem {
+                    edges: graph.edges(),
+                    priors: &priors,
+                };
+                report = polish(problem, report.poses.clone(), options.lm)?;
+                georef = gps.fit(&report.poses);
+            }
+        }
         let secs = start.elapsed().as_secs_f64();
         (report.poses.clone(), Some(report), secs)
     } else {
@@ -171,5 +204,17 @@ pub fn solve_batch(graph: &PoseGraph, options: &BatchOptions) -> Result<BatchSol
         polish: polish_report,
         rho,
         median_axis_length,
+        georef,
     })
+}
+
+/// `gps` with its weight set to the graph's variance factor (without GPS,
+/// two-stage), when it asks for calibration.
+fn calibrated(graph: &PoseGraph, gps: &GpsInput) -> Result<GpsInput, SolveError> {
+    let mut gps = gps.clone();
+    if gps.calibrate {
+        let chi2 = chi2(graph, &two_stage::solve(graph)?);
+        gps.weight = variance_factor(chi2, graph.edges().len(), graph.len());
+    }
+    Ok(gps)
 }

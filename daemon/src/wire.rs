@@ -10,11 +10,12 @@
 // built once per refusal, so its size in a Result does not matter.
 #![allow(clippy::result_large_err)]
 
-use crate::engine::{EdgeInput, EngineError};
+use crate::engine::{EdgeInput, EngineError, FixInput};
 use crate::geometry::Pose2;
+use crate::gps::{covariance, Geodetic, GpsError};
 use crate::graph::{EdgeKind, GraphError, Information, InformationError, KeyframeId};
 use slamd_protocol::message::kind;
-use slamd_protocol::{Edge, EdgeKindWire, Keyframe, Rejection, RejectionReason, PROTOCOL_VERSION};
+use slamd_protocol::{Edge, EdgeKindWire, GpsFix, Keyframe, Rejection, RejectionReason, PROTOCOL_VERSION};
 
 /// Who sent a message and its number.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -117,6 +118,57 @@ pub fn edge_in(m: &Edge) -> Result<(Origin, EdgeInput), Rejection> {
     Ok((o, EdgeInput::new(m.from, m.to, measurement, information, kind)))
 }
 
+/// A GPS fix message as the engine takes it.
+pub fn gps_in(m: &GpsFix) -> Result<(Origin, FixInput), Rejection> {
+    let o = Origin {
+        frontend: m.frontend,
+        sequence: m.sequence,
+    };
+    let ids = [m.keyframe, 0];
+    check_version(o, kind::GPS, m.protocol, ids)?;
+    let height = if m.has_altitude != 0 { m.altitude } else { 0.0 };
+    let position = Geodetic::new(m.latitude, m.longitude, height);
+    let checked = position.and_then(|p| covariance(m.covariance).map(|_| p));
+    match checked {
+        Ok(position) => Ok((
+            o,
+            FixInput {
+                keyframe: m.keyframe,
+                position,
+                covariance: m.covariance,
+            },
+        )),
+        Err(e) => {
+            let reason = match e {
+                GpsError::NonFinite => RejectionReason::NonFinite,
+                GpsError::OutOfRange => RejectionReason::OutOfRange,
+                _ => RejectionReason::NotPositiveDefinite,
+            };
+            let text = format!(
+                "fix on keyframe {} at ({}, {}): {e}",
+                m.keyframe, m.latitude, m.longitude
+            );
+            Err(reject(o, kind::GPS, reason, ids, &text))
+        }
+    }
+}
+
+/// A GPS fix message from the frontend's side.
+pub fn gps_out(f: &FixInput, o: Origin) -> GpsFix {
+    GpsFix {
+        keyframe: f.keyframe,
+        latitude: f.position.lat,
+        longitude: f.position.lon,
+        altitude: f.position.height,
+        covariance: f.covariance,
+        has_altitude: 1,
+        frontend: o.frontend,
+        sequence: o.sequence,
+        protocol: PROTOCOL_VERSION,
+        reserved: 0,
+    }
+}
+
 /// The rejection for a change the engine refused.
 pub fn engine_rejection(o: Origin, message: u32, ids: [u64; 2], e: &EngineError) -> Rejection {
     let reason = match e {
@@ -125,6 +177,10 @@ pub fn engine_rejection(o: Origin, message: u32, ids: [u64; 2], e: &EngineError)
         EngineError::Graph(GraphError::SelfEdge(_)) => RejectionReason::SelfEdge,
         EngineError::Graph(GraphError::NonFinite(_)) => RejectionReason::NonFinite,
         EngineError::Graph(GraphError::Information(_)) => RejectionReason::NotPositiveDefinite,
+        EngineError::Gps(GpsError::NonFinite) => RejectionReason::NonFinite,
+        EngineError::Gps(GpsError::OutOfRange) => RejectionReason::OutOfRange,
+        EngineError::Gps(_) => RejectionReason::NotPositiveDefinite,
+        EngineError::FixKeyframe(_) => RejectionReason::UnknownKeyframe,
         _ => RejectionReason::Other,
     };
     reject(o, message, reason, ids, &e.to_string())
@@ -186,6 +242,47 @@ mod tests {
         )
     }
 
+    fn fix(lat: f64, cov: [f64; 4]) -> GpsFix {
+        let input = FixInput {
+            keyframe: 4,
+            position: Geodetic {
+                lat,
+                lon: 9.2,
+                height: 0.0,
+            },
+            covariance: cov,
+        };
+        gps_out(
+            &input,
+            Origin {
+                frontend: 1,
+                sequence: 3,
+            },
+        )
+    }
+
+    #[test]
+    fn fixes_are_checked() {
+        let (_, f) = gps_in(&fix(45.5, [1.0, 0.0, 0.0, 1.0])).unwrap();
+        assert_eq!((f.keyframe, f.position.lat), (4, 45.5));
+        let reason = |m: GpsFix| RejectionReason::from_u32(gps_in(&m).unwrap_err().reason);
+        assert_eq!(
+            reason(fix(91.0, [1.0, 0.0, 0.0, 1.0])),
+            RejectionReason::OutOfRange
+        );
+        assert_eq!(
+            reason(fix(f64::NAN, [1.0, 0.0, 0.0, 1.0])),
+            RejectionReason::NonFinite
+        );
+        assert_eq!(
+            reason(fix(45.5, [1.0, 0.0, 0.0, -1.0])),
+            RejectionReason::NotPositiveDefinite
+        );
+        let mut old = fix(45.5, [1.0, 0.0, 0.0, 1.0]);
+        old.protocol = PROTOCOL_VERSION - 1;
+        assert_eq!(reason(old), RejectionReason::ProtocolVersion);
+    }
+
     #[test]
     fn edges_round_trip() {
         let (o, back) = edge_in(&edge()).unwrap();
@@ -232,7 +329,7 @@ mod tests {
             (
                 |e| e.protocol = 99,
                 RejectionReason::ProtocolVersion,
-                "message speaks protocol 99, the daemon 1",
+                "message speaks protocol 99, the daemon 2",
             ),
         ];
         for (break_it, reason, text) in cases {

@@ -11,7 +11,7 @@
 use iceoryx2::prelude::*;
 
 /// The layout version of every message below. Bump it on any change.
-pub const PROTOCOL_VERSION: u32 = 1;
+pub const PROTOCOL_VERSION: u32 = 2;
 
 /// Frontends whose progress a snapshot header reports.
 pub const MAX_FRONTENDS: usize = 8;
@@ -132,6 +132,12 @@ pub struct Pose {
     pub y: f64,
     /// Map-frame heading (rad).
     pub theta: f64,
+    /// East of the geodetic origin (m), when the header says georeferenced.
+    pub east: f64,
+    /// North of the geodetic origin (m), when georeferenced.
+    pub north: f64,
+    /// Heading from east, counter-clockwise (rad), when georeferenced.
+    pub heading: f64,
 }
 
 /// How far the daemon has got with one frontend's messages.
@@ -171,10 +177,20 @@ pub struct SnapshotHeader {
     pub edges: u64,
     /// Messages rejected so far (details on the rejection topic).
     pub rejected: u64,
-    /// Edges waiting for a keyframe that has not arrived.
+    /// Edges and fixes waiting for a keyframe that has not arrived.
     pub held: u64,
     /// Re-solves completed.
     pub resolves: u64,
+    /// GPS fixes received so far.
+    pub fixes: u64,
+    /// 1 when GPS has georeferenced the map: the poses' `east`, `north`,
+    /// `heading` are valid, in the ENU frame at `origin`.
+    pub georeferenced: u32,
+    /// 1 when `origin` is set (the configured origin, or the first fix).
+    pub has_origin: u32,
+    /// The ENU frame's origin: WGS84 latitude, longitude (degrees), height
+    /// above the ellipsoid (m).
+    pub origin: [f64; 3],
     /// Progress of the most recent frontends.
     pub acks: [FrontendAck; MAX_FRONTENDS],
 }
@@ -334,7 +350,7 @@ mod tests {
     #[test]
     fn layouts_are_what_the_protocol_says() {
         assert_eq!(std::mem::size_of::<Edge>(), 112);
-        assert_eq!(std::mem::size_of::<Pose>(), 32);
+        assert_eq!(std::mem::size_of::<Pose>(), 56);
         assert_eq!(std::mem::align_of::<SnapshotHeader>(), 8);
     }
 }

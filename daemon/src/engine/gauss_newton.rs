@@ -11,6 +11,7 @@
 use crate::geometry::Pose2;
 use crate::graph::{Edge, PoseGraph};
 use crate::nonlinear::structure::{jacobian, HessianStructure, NONE};
+use crate::nonlinear::{PositionPrior, Problem};
 use crate::sparse::dynamic::{DynamicLdlt, IncrementalCholesky, UpdateError};
 use crate::sparse::FactorError;
 
@@ -49,10 +50,11 @@ impl GaussNewton {
 
     /// A fresh factorisation at `lin` (one pose per keyframe of `graph`):
     /// keyframes `order` (gauge excluded) in elimination order, `edges` with
-    /// their scales.
+    /// their scales, and position `priors` (GPS).
     pub fn build(
         graph: &PoseGraph,
         edges: &[(usize, f64)],
+        priors: &[PositionPrior],
         lin: Vec<Pose2>,
         order: &[usize],
     ) -> Result<Self, FactorError> {
@@ -72,7 +74,7 @@ impl GaussNewton {
         let structure = HessianStructure::new(block_of.clone(), order.len(), &scaled);
         let mut h = structure.pattern().clone();
         let mut g = vec![0.0; structure.dim()];
-        structure.assemble(&scaled, &lin, &mut h, &mut g);
+        structure.assemble(&scaled, priors, &lin, &mut h, &mut g);
         let identity: Vec<usize> = (0..h.n()).collect();
         let factor = DynamicLdlt::from_matrix(&h, &identity)?;
         let chol = IncrementalCholesky::new(factor, g.iter().map(|v| -v).collect());
@@ -81,7 +83,11 @@ impl GaussNewton {
             .map(|&b| if b == NONE { NONE } else { 3 * b })
             .collect();
         let keyframe_of = order.iter().flat_map(|&k| [k as u32; 3]).collect();
-        let lin_chi2 = crate::graph::chi2_of_edges(&scaled, &lin);
+        let lin_chi2 = Problem {
+            edges: &scaled,
+            priors,
+        }
+        .chi2(&lin);
         let mut gn = Self {
             column,
             keyframe_of,
@@ -151,6 +157,32 @@ impl GaussNewton {
                 .collect()
         });
         self.chol.rank_k(&[&w[0], &w[1], &w[2]], delta.signum())
+    }
+
+    /// Adds a position prior linearised at `lin`: error `e = p_k − target`,
+    /// Jacobian `[I₂ 0]`, so a rank-2 update on the keyframe's `x, y`
+    /// columns. On the gauge it only adds to the cost.
+    pub fn apply_prior(&mut self, prior: &PositionPrior) -> Result<(), UpdateError> {
+        let p = self.lin[prior.keyframe].position() - prior.target;
+        let e = nalgebra::Vector2::new(p.re, p.im);
+        let omega = prior.information;
+        self.lin_chi2 += (e.transpose() * omega * e)[0];
+        let c = self.column[prior.keyframe];
+        if c == NONE {
+            return Ok(());
+        }
+        let c = c as usize;
+        let g = omega * e;
+        self.chol.add_rhs(c, -g[0]);
+        self.chol.add_rhs(c + 1, -g[1]);
+        let Some(chol) = omega.cholesky() else {
+            return Ok(());
+        };
+        let l = chol.l();
+        // Ω = L Lᵀ: rows of Lᵀ
+        let w0 = [(c, l[(0, 0)]), (c + 1, l[(1, 0)])];
+        let w1 = [(c + 1, l[(1, 1)])];
+        self.chol.rank_k(&[&w0, &w1], 1.0)
     }
 
     /// Solves for δ; columns whose change stays within `threshold` do not

@@ -53,9 +53,11 @@ pub use snapshot::Snapshot;
 pub use state::{Op, SnapshotSource};
 
 use crate::geometry::Pose2;
+use crate::gps::{covariance, Geodetic, GpsConfig, GpsError, GpsFix, LocalFrame};
 use crate::graph::{EdgeKind, GraphError, Information, KeyframeId};
 use crate::nonlinear::LevenbergMarquardtParams;
 use crate::sparse::dynamic::UpdateError;
+use faer::c64;
 use resolve::Job;
 use state::State;
 use std::fmt;
@@ -108,6 +110,10 @@ pub enum EngineError {
     OdometrySwitch(usize),
     /// A downdate lost positive definiteness; the engine refactorised.
     Numeric(UpdateError),
+    /// A GPS fix out of range, non-finite, or with a bad covariance.
+    Gps(GpsError),
+    /// A GPS fix for a keyframe that has not arrived.
+    FixKeyframe(KeyframeId),
 }
 
 impl fmt::Display for EngineError {
@@ -118,6 +124,8 @@ impl fmt::Display for EngineError {
             EngineError::InvalidWeight(w) => write!(f, "edge weight {w} is not a finite number ≥ 0"),
             EngineError::OdometrySwitch(e) => write!(f, "edge {e} is odometry and cannot be switched off"),
             EngineError::Numeric(e) => write!(f, "{e}; refactorised"),
+            EngineError::Gps(e) => e.fmt(f),
+            EngineError::FixKeyframe(id) => write!(f, "GPS fix for unknown keyframe {id}"),
         }
     }
 }
@@ -128,6 +136,17 @@ impl From<GraphError> for EngineError {
     fn from(e: GraphError) -> Self {
         EngineError::Graph(e)
     }
+}
+
+/// A GPS fix as a frontend gives it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FixInput {
+    /// The keyframe it was taken at.
+    pub keyframe: KeyframeId,
+    /// Where (WGS84).
+    pub position: Geodetic,
+    /// Covariance of (east, north) in m², row-major.
+    pub covariance: [f64; 4],
 }
 
 /// Tuning of the [`Engine`]. The defaults are what the replay benchmarks
@@ -159,6 +178,10 @@ pub struct EngineConfig {
     pub linear_stages: bool,
     /// The polish of each re-solve.
     pub polish: LevenbergMarquardtParams,
+    /// GPS: the ENU origin and how fixes weigh (the configuration's `[gps]`
+    /// section; see [`Config::engine`](crate::config::Config::engine)).
+    #[serde(skip)]
+    pub gps: GpsConfig,
 }
 
 impl Default for EngineConfig {
@@ -173,6 +196,7 @@ impl Default for EngineConfig {
             snapshot: SnapshotSource::default(),
             linear_stages: false,
             polish: LevenbergMarquardtParams::default(),
+            gps: GpsConfig::default(),
         }
     }
 }
@@ -216,6 +240,10 @@ pub struct Engine {
     nnz_after_resolve: usize,
     version: u64,
     stats: EngineStats,
+    /// The ENU frame: the configured origin, else the first fix's.
+    frame: Option<LocalFrame>,
+    /// Fixes in the estimate at the last re-solve.
+    fixes_at_resolve: usize,
 }
 
 impl Engine {
@@ -223,7 +251,6 @@ impl Engine {
     pub fn new(config: EngineConfig) -> Self {
         Self {
             state: State::new(config.snapshot, config.linear_stages),
-            config,
             job: None,
             log: Vec::new(),
             seq: 0,
@@ -231,6 +258,9 @@ impl Engine {
             nnz_after_resolve: 0,
             version: 0,
             stats: EngineStats::default(),
+            frame: config.gps.origin.map(LocalFrame::new),
+            fixes_at_resolve: 0,
+            config,
         }
     }
 
@@ -245,6 +275,32 @@ impl Engine {
     pub fn add_keyframe(&mut self, id: KeyframeId, guess: Option<Pose2>) -> Result<usize, EngineError> {
         self.submit(Op::Keyframe { id, guess })?;
         Ok(self.state.model.graph.len() - 1)
+    }
+
+    /// Adds a GPS fix to a known keyframe (the daemon holds fixes that
+    /// overtake their keyframe, as it holds edges). The first fix sets the
+    /// ENU origin unless the configuration names one. Fixes enter the
+    /// estimate as absolute position priors once a re-solve has
+    /// georeferenced the map; one starts as soon as two fixes are in, and
+    /// again whenever their number has doubled.
+    pub fn add_gps(&mut self, fix: FixInput) -> Result<(), EngineError> {
+        let p = fix.position;
+        let position = Geodetic::new(p.lat, p.lon, p.height).map_err(EngineError::Gps)?;
+        let cov = covariance(fix.covariance).map_err(EngineError::Gps)?;
+        let k =
+            (self.state.model.graph.index_of(fix.keyframe)).ok_or(EngineError::FixKeyframe(fix.keyframe))?;
+        let frame = *self.frame.get_or_insert(LocalFrame::new(position));
+        let (e, n, _) = frame.to_enu(&position);
+        self.submit(Op::Gps(GpsFix {
+            keyframe: k,
+            enu: c64::new(e, n),
+            covariance: cov,
+        }))
+    }
+
+    /// The ENU frame's origin, once known.
+    pub fn gps_origin(&self) -> Option<Geodetic> {
+        self.frame.map(|f| f.origin)
     }
 
     /// Adds an edge between two known keyframes and returns its index. It
@@ -347,6 +403,8 @@ impl Engine {
             keyframes: m.graph.keyframes(),
             joined: &m.joined,
             poses: self.state.estimate(),
+            georef: self.state.georef(),
+            origin: self.gps_origin(),
         }
     }
 
@@ -416,11 +474,16 @@ impl Engine {
         let by_fill = c.resolve_fill_ratio > 0.0
             && self.nnz_after_resolve > 0
             && self.state.factor_nnz() as f64 > c.resolve_fill_ratio * self.nnz_after_resolve as f64;
-        by_count || by_fill
+        // georeference as soon as two fixes are in, and again whenever
+        // their number has doubled
+        let fixes = self.state.usable_fixes();
+        let by_gps = fixes >= 2 && fixes >= 2 * self.fixes_at_resolve.max(1);
+        by_count || by_fill || by_gps
     }
 
     fn start_resolve(&mut self) {
         self.edges_since_resolve = 0;
+        self.fixes_at_resolve = self.state.usable_fixes();
         let model = self.state.model().clone();
         let estimate = self.state.estimate().to_vec();
         if self.config.background {
@@ -477,11 +540,20 @@ impl Engine {
         let c = &self.config;
         let lm = polish.then_some(&c.polish);
         let (model, start) = (self.state.model().clone(), self.state.estimate());
-        match State::rebuild(model, start, lm, c.recent_last, c.snapshot, c.linear_stages) {
+        match State::rebuild(
+            model,
+            start,
+            lm,
+            &c.gps,
+            c.recent_last,
+            c.snapshot,
+            c.linear_stages,
+        ) {
             Ok(state) => {
                 self.state = state;
                 self.after_resolve();
                 self.edges_since_resolve = 0;
+                self.fixes_at_resolve = self.state.usable_fixes();
             }
             Err(e) => tracing::error!(error = %e, "Refactorisation failed; the estimate is stale."),
         }

@@ -88,6 +88,7 @@ pub fn run(model: Model, estimate: &[Pose2], config: &EngineConfig, ops: &Receiv
         model,
         estimate,
         Some(&config.polish),
+        &config.gps,
         config.recent_last,
         config.snapshot,
         config.linear_stages,

@@ -1,6 +1,7 @@
 //! [`Snapshot`]: the estimate the engine publishes after each update.
 
 use crate::geometry::Pose2;
+use crate::gps::{Geodetic, Georef};
 use crate::graph::{Keyframe, KeyframeId};
 
 /// A borrowed view of the current estimate: the poses of every keyframe
@@ -16,6 +17,10 @@ pub struct Snapshot<'a> {
     pub(super) keyframes: &'a [Keyframe],
     pub(super) joined: &'a [bool],
     pub(super) poses: &'a [Pose2],
+    /// The map→ENU motion, once two GPS fixes have georeferenced the map.
+    pub georef: Option<Georef>,
+    /// The geodetic origin of the ENU frame, once known.
+    pub origin: Option<Geodetic>,
 }
 
 impl<'a> Snapshot<'a> {
@@ -28,6 +33,20 @@ impl<'a> Snapshot<'a> {
     /// The pose of one keyframe, if it is in the estimate.
     pub fn pose(&self, index: usize) -> Option<Pose2> {
         (index < self.joined.len() && self.joined[index]).then(|| self.poses[index])
+    }
+
+    /// The pose of one keyframe in ENU (x east, y north, heading from
+    /// east), when the map is georeferenced.
+    pub fn enu_pose(&self, index: usize) -> Option<Pose2> {
+        Some(self.georef?.to_enu(&self.pose(index)?))
+    }
+
+    /// `(id, ENU pose)` of every keyframe in the estimate; empty until the
+    /// map is georeferenced.
+    pub fn enu_poses(&self) -> impl Iterator<Item = (KeyframeId, Pose2)> + 'a {
+        let g = self.georef;
+        self.poses()
+            .filter_map(move |(id, p)| g.map(|g| (id, g.to_enu(&p))))
     }
 
     /// Number of keyframes in the estimate.

@@ -8,9 +8,10 @@ use super::gauss_newton::GaussNewton;
 use super::linear_stages::LinearStages;
 use super::{EdgeInput, EngineError};
 use crate::geometry::Pose2;
-use crate::graph::{edge_chi2, Edge, EdgeKind, KeyframeId, PoseGraph};
+use crate::gps::{variance_factor, Georef, GpsConfig, GpsFix, GpsInput};
+use crate::graph::{chi2_of_edges, edge_chi2, Edge, EdgeKind, KeyframeId, PoseGraph};
 use crate::linear::two_stage;
-use crate::nonlinear::{polish, LevenbergMarquardtParams};
+use crate::nonlinear::{polish, LevenbergMarquardtParams, PositionPrior, Problem};
 use crate::sparse::ordering::amd_newest_last;
 use crate::sparse::FactorError;
 use std::collections::HashMap;
@@ -27,6 +28,8 @@ pub enum Op {
     },
     /// A new edge.
     Edge(EdgeInput),
+    /// A GPS fix on a known keyframe, in the engine's ENU frame.
+    Gps(GpsFix),
     /// A new weight `scale ∈ [0, ∞)` for an edge (0 removes it).
     Weight {
         /// The edge's index.
@@ -54,6 +57,22 @@ pub struct Model {
     /// Edges received but not yet connected to the solvers (that happens at
     /// the next solve, odometry first).
     pub pending: Vec<usize>,
+    /// GPS fixes, in arrival order.
+    pub fixes: Vec<GpsFix>,
+    /// Whether each fix's prior is in the solver.
+    pub fix_applied: Vec<bool>,
+    /// The map→ENU motion of the last re-solve (with two or more fixes).
+    pub georef: Option<Georef>,
+    /// The weight of every GPS prior (the graph's variance factor).
+    pub gps_weight: f64,
+}
+
+impl Model {
+    /// The prior of fix `f` under the current georeference.
+    fn prior(&self, f: usize) -> Option<PositionPrior> {
+        let g = self.georef.as_ref()?;
+        Some(self.fixes[f].prior(g, self.gps_weight))
+    }
 }
 
 /// Where the published estimate comes from between re-solves.
@@ -144,8 +163,47 @@ impl State {
                 self.model.pending.push(e);
                 Ok(())
             }
+            Op::Gps(fix) => {
+                if fix.keyframe >= self.model.graph.len() {
+                    return Err(EngineError::FixKeyframe(fix.keyframe as KeyframeId));
+                }
+                self.model.fixes.push(*fix);
+                self.model.fix_applied.push(false);
+                Ok(())
+            }
             Op::Weight { edge, scale } => self.reweight(*edge, *scale),
         }
+    }
+
+    /// Puts the priors of fixes on joined keyframes into the solver, once a
+    /// georeference exists (the next re-solve makes one).
+    fn apply_fixes(&mut self) -> Result<(), EngineError> {
+        if self.model.georef.is_none() {
+            return Ok(());
+        }
+        let Some(gn) = &mut self.gn else {
+            return Ok(());
+        };
+        for f in 0..self.model.fixes.len() {
+            if self.model.fix_applied[f] || !self.model.joined[self.model.fixes[f].keyframe] {
+                continue;
+            }
+            let prior = self.model.prior(f).expect("georeferenced");
+            self.model.fix_applied[f] = true;
+            gn.apply_prior(&prior).map_err(EngineError::Numeric)?;
+        }
+        Ok(())
+    }
+
+    /// Fixes on keyframes in the estimate.
+    pub fn usable_fixes(&self) -> usize {
+        let m = &self.model;
+        m.fixes.iter().filter(|f| m.joined[f.keyframe]).count()
+    }
+
+    /// The map→ENU motion, once fitted.
+    pub fn georef(&self) -> Option<Georef> {
+        self.model.georef
     }
 
     /// Checks a reweight without applying it.
@@ -292,7 +350,7 @@ impl State {
     /// Brings the estimate up to date (see [`GaussNewton::solve`]) and the
     /// cached χ² with it. Returns the number of keyframes that moved.
     pub fn solve(&mut self, threshold: f64) -> Result<usize, EngineError> {
-        let connected = self.connect_pending();
+        let connected = self.connect_pending().and(self.apply_fixes());
         let changed = match self.source {
             SnapshotSource::GaussNewton => {
                 let gn = self.gn.as_mut().expect("Gauss–Newton source");
@@ -387,6 +445,7 @@ impl State {
         mut model: Model,
         start: &[Pose2],
         lm: Option<&LevenbergMarquardtParams>,
+        gps: &GpsConfig,
         recent: usize,
         source: SnapshotSource,
         linear: bool,
@@ -422,7 +481,7 @@ impl State {
             // estimate can sit in the wrong basin (Manhattan's first
             // re-solve reached χ² 50 from it against an optimum of 24), and
             // the two-stage solution does not depend on it.
-            let mut best = polish(&edges, initial.clone(), *params).ok();
+            let mut best = polish(Problem::edges(&edges), initial.clone(), *params).ok();
             let keyframes = joined.iter().map(|&k| model.graph.keyframes()[k]).collect();
             let linear = PoseGraph::from_parts(keyframes, edges.clone())
                 .ok()
@@ -430,17 +489,25 @@ impl State {
             if let Some(linear) = linear {
                 let gauge = initial[0];
                 let start: Vec<Pose2> = linear.iter().map(|p| gauge.compose(p)).collect();
-                if let Ok(other) = polish(&edges, start, *params) {
+                if let Ok(other) = polish(Problem::edges(&edges), start, *params) {
                     if best.as_ref().is_none_or(|b| other.final_chi2 < b.final_chi2) {
                         best = Some(other);
                     }
                 }
             }
-            if let Some(report) = best {
-                for (c, &k) in joined.iter().enumerate() {
-                    lin[k] = report.poses[c];
-                }
+            let mut poses = best.map_or(initial, |r| r.poses);
+            model.georeference(gps, &edges, &compact, &mut poses, params);
+            for (c, &k) in joined.iter().enumerate() {
+                lin[k] = poses[c];
             }
+        }
+        // every fix on a joined keyframe enters the fresh factor
+        let mut priors = Vec::new();
+        for f in 0..model.fixes.len() {
+            let on = model.joined[model.fixes[f].keyframe];
+            let prior = if on { model.prior(f) } else { None };
+            model.fix_applied[f] = prior.is_some();
+            priors.extend(prior);
         }
         // elimination order over joined keyframes except the gauge
         let pairs = active.iter().filter_map(|&(e, _)| {
@@ -451,9 +518,13 @@ impl State {
         let perm = amd_newest_last(joined.len().saturating_sub(1), pairs, recent);
         let order: Vec<usize> = perm.iter().map(|&c| joined[c + 1]).collect();
         let gn = match source {
-            SnapshotSource::GaussNewton => {
-                Some(GaussNewton::build(&model.graph, &active, lin.clone(), &order)?)
-            }
+            SnapshotSource::GaussNewton => Some(GaussNewton::build(
+                &model.graph,
+                &active,
+                &priors,
+                lin.clone(),
+                &order,
+            )?),
             SnapshotSource::Linear => None,
         };
         let linear = if linear || source == SnapshotSource::Linear {
@@ -496,6 +567,54 @@ impl State {
 }
 
 impl Model {
+    /// With two or more fixes on the joined keyframes: sets the GPS weight
+    /// from the polished graph's χ², fits the georeference to `poses`
+    /// (compact: `compact[k]` is keyframe `k`'s index), polishes with the
+    /// fixes as priors and refits, twice.
+    fn georeference(
+        &mut self,
+        config: &GpsConfig,
+        edges: &[Edge],
+        compact: &[usize],
+        poses: &mut Vec<Pose2>,
+        params: &LevenbergMarquardtParams,
+    ) {
+        let fixes: Vec<GpsFix> = (self.fixes.iter())
+            .filter(|f| self.joined[f.keyframe])
+            .map(|f| GpsFix {
+                keyframe: compact[f.keyframe],
+                ..*f
+            })
+            .collect();
+        if !config.absolute || fixes.len() < 2 {
+            return;
+        }
+        let mut input = GpsInput::with_config(fixes, config);
+        if config.calibrate {
+            input.weight = variance_factor(chi2_of_edges(edges, poses), edges.len(), poses.len());
+        }
+        for _ in 0..2 {
+            let Some(g) = input.fit(poses) else {
+                return;
+            };
+            let priors = input.priors(&g);
+            if let Ok(r) = polish(
+                Problem {
+                    edges,
+                    priors: &priors,
+                },
+                poses.clone(),
+                *params,
+            ) {
+                *poses = r.poses;
+            }
+        }
+        if let Some(g) = input.fit(poses) {
+            self.georef = Some(g);
+            self.gps_weight = input.weight;
+        }
+    }
+
     /// Keyframes (other than the gauge) left without any weighted edge are
     /// put back to waiting, with their edges: they are unconstrained and
     /// would make the normal equations singular.

@@ -7,6 +7,7 @@
 
 mod error;
 mod g2o;
+mod gps_csv;
 mod isam;
 mod poses;
 pub mod svg;
@@ -14,6 +15,7 @@ mod toro;
 mod write;
 
 pub use error::{ReadError, ReadErrorKind};
+pub use gps_csv::{read_fixes, FixRecord};
 pub use poses::{read_ground_truth, read_pose_table};
 pub use write::{write_g2o, write_pose_table};
 

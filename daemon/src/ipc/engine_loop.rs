@@ -1,9 +1,9 @@
 //! The daemon's engine thread: applies each batch of messages, holds edges
 //! for missing keyframes, publishes one snapshot per batch.
 
-use super::held::{Held, HeldEdge};
+use super::held::{Held, Waiting};
 use crate::config::Config;
-use crate::engine::{EdgeInput, Engine, EngineError};
+use crate::engine::{EdgeInput, Engine, EngineError, FixInput};
 use crate::geometry::Pose2;
 use crate::graph::{GraphError, KeyframeId};
 use crate::wire::{engine_rejection, Origin};
@@ -22,6 +22,8 @@ pub enum Msg {
     Keyframe(Origin, KeyframeId, Option<Pose2>),
     /// A checked edge.
     Edge(Origin, EdgeInput),
+    /// A checked GPS fix.
+    Gps(Origin, FixInput),
     /// A message refused on arrival; publish and count it.
     Rejected(Rejection),
     /// The IPC thread has handed over everything it had.
@@ -39,6 +41,8 @@ pub struct Counters {
     pub keyframes: u64,
     /// Edges accepted (including those still held).
     pub edges: u64,
+    /// GPS fixes accepted (including those still held).
+    pub fixes: u64,
     /// Messages rejected.
     pub rejected: u64,
 }
@@ -47,7 +51,8 @@ pub struct Counters {
 pub struct EngineLoop {
     engine: Engine,
     outlet: Outlet,
-    held: Held,
+    held: Held<EdgeInput>,
+    held_fixes: Held<FixInput>,
     config: Config,
     counters: Counters,
     acks: Vec<FrontendAck>,
@@ -59,9 +64,10 @@ pub struct EngineLoop {
 impl EngineLoop {
     pub fn new(config: Config, outlet: Outlet) -> Self {
         Self {
-            engine: Engine::new(config.engine.clone()),
+            engine: Engine::new(config.engine()),
             outlet,
             held: Held::default(),
+            held_fixes: Held::default(),
             config,
             counters: Counters::default(),
             acks: Vec::with_capacity(MAX_FRONTENDS),
@@ -128,7 +134,10 @@ impl EngineLoop {
                         self.counters.keyframes += 1;
                         self.dirty = true;
                         for h in self.held.release(id) {
-                            self.add_edge(h.origin, h.edge, h.since);
+                            self.add_edge(h.origin, h.item, h.since);
+                        }
+                        for h in self.held_fixes.release(id) {
+                            self.add_gps(h.origin, h.item, h.since);
                         }
                     }
                     Err(e) => self.reject(engine_rejection(o, kind::KEYFRAME, [id, 0], &e)),
@@ -138,6 +147,11 @@ impl EngineLoop {
             Msg::Edge(o, edge) => {
                 self.last_input = Instant::now();
                 self.add_edge(o, edge, Instant::now());
+                self.ack(o);
+            }
+            Msg::Gps(o, fix) => {
+                self.last_input = Instant::now();
+                self.add_gps(o, fix, Instant::now());
                 self.ack(o);
             }
             Msg::Rejected(r) => {
@@ -162,9 +176,9 @@ impl EngineLoop {
                 self.dirty = true;
             }
             Err(EngineError::Graph(GraphError::UnknownKeyframe(missing))) => {
-                let h = HeldEdge {
+                let h = Waiting {
                     origin: o,
-                    edge,
+                    item: edge,
                     since,
                 };
                 if !self.held.hold(missing, h, self.config.held_edges) {
@@ -184,6 +198,35 @@ impl EngineLoop {
                 }
             }
             Err(e) => self.reject(engine_rejection(o, kind::EDGE, [edge.from, edge.to], &e)),
+        }
+    }
+
+    /// Adds a fix, or holds it while its keyframe is missing (sharing the
+    /// `held_edges` cap and timeout).
+    fn add_gps(&mut self, o: Origin, fix: FixInput, since: Instant) {
+        match self.engine.add_gps(fix) {
+            Ok(()) => {
+                self.counters.fixes += 1;
+                self.dirty = true;
+            }
+            Err(EngineError::FixKeyframe(missing)) => {
+                let h = Waiting {
+                    origin: o,
+                    item: fix,
+                    since,
+                };
+                if !self.held_fixes.hold(missing, h, self.config.held_edges) {
+                    self.reject(Rejection::new(
+                        o.frontend,
+                        o.sequence,
+                        kind::GPS,
+                        RejectionReason::HeldOverflow,
+                        [fix.keyframe, 0],
+                        &format!("fix on keyframe {missing}: too many messages wait (held_edges)"),
+                    ));
+                }
+            }
+            Err(e) => self.reject(engine_rejection(o, kind::GPS, [fix.keyframe, 0], &e)),
         }
     }
 
@@ -224,10 +267,23 @@ impl EngineLoop {
                 h.origin.sequence,
                 kind::EDGE,
                 RejectionReason::UnknownKeyframe,
-                [h.edge.from, h.edge.to],
+                [h.item.from, h.item.to],
                 &format!(
                     "edge {}→{}: keyframe {missing} did not arrive within {} s",
-                    h.edge.from, h.edge.to, self.config.held_timeout_s
+                    h.item.from, h.item.to, self.config.held_timeout_s
+                ),
+            ));
+        }
+        for (missing, h) in self.held_fixes.expire(Instant::now(), limit) {
+            self.reject(Rejection::new(
+                h.origin.frontend,
+                h.origin.sequence,
+                kind::GPS,
+                RejectionReason::UnknownKeyframe,
+                [missing, 0],
+                &format!(
+                    "GPS fix: keyframe {missing} did not arrive within {} s",
+                    self.config.held_timeout_s
                 ),
             ));
         }
@@ -266,19 +322,30 @@ impl EngineLoop {
             keyframes: self.counters.keyframes,
             edges: self.counters.edges,
             rejected: self.counters.rejected,
-            held: self.held.len() as u64,
+            held: (self.held.len() + self.held_fixes.len()) as u64,
             resolves: snap.resolves as u64,
+            fixes: self.counters.fixes,
+            georeferenced: u32::from(snap.georef.is_some()),
+            has_origin: u32::from(snap.origin.is_some()),
+            origin: snap.origin.map_or([0.0; 3], |o| [o.lat, o.lon, o.height]),
             acks: {
                 let mut a = [FrontendAck::default(); MAX_FRONTENDS];
                 a[..self.acks.len()].copy_from_slice(&self.acks);
                 a
             },
         };
-        let poses = snap.poses().map(|(id, p)| Pose {
-            id,
-            x: p.x,
-            y: p.y,
-            theta: p.theta,
+        let georef = snap.georef;
+        let poses = snap.poses().map(|(id, p)| {
+            let enu = georef.map_or(Pose2::new(0.0, 0.0, 0.0), |g| g.to_enu(&p));
+            Pose {
+                id,
+                x: p.x,
+                y: p.y,
+                theta: p.theta,
+                east: enu.x,
+                north: enu.y,
+                heading: enu.theta,
+            }
         });
         let result: Result<(), TransportError> = self.outlet.publish(header, snap.len(), poses);
         if let Err(e) = result {

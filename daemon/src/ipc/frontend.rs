@@ -1,10 +1,10 @@
-//! [`Frontend`]: publishing keyframes and edges to a running daemon.
+//! [`Frontend`]: publishing keyframes, edges and GPS fixes to a running daemon.
 
 use crate::config::Config;
-use crate::engine::EdgeInput;
+use crate::engine::{EdgeInput, FixInput};
 use crate::geometry::Pose2;
 use crate::graph::KeyframeId;
-use crate::wire::{edge_out, keyframe_out, Origin};
+use crate::wire::{edge_out, gps_out, keyframe_out, Origin};
 use slamd_protocol::transport::{FrontendLink, TransportError};
 use std::sync::atomic::{AtomicU32, Ordering};
 use std::time::Duration;
@@ -72,6 +72,13 @@ impl Frontend {
     pub fn add_edge(&mut self, edge: &EdgeInput) -> Result<u64, TransportError> {
         let o = self.next();
         self.link.send_edge(edge_out(edge, o))?;
+        Ok(o.sequence)
+    }
+
+    /// Publishes a GPS fix; returns its message number.
+    pub fn add_gps(&mut self, fix: &FixInput) -> Result<u64, TransportError> {
+        let o = self.next();
+        self.link.send_gps(gps_out(fix, o))?;
         Ok(o.sequence)
     }
 

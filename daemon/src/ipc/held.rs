@@ -1,60 +1,69 @@
-//! [`Held`]: edges waiting for a keyframe that has not arrived yet.
+//! [`Held`]: edges and GPS fixes waiting for a keyframe that has not
+//! arrived yet.
 //!
-//! Frontends publish on independent queues, so an edge can overtake its
-//! keyframe. Such an edge waits here, keyed by the missing id, until the
+//! Frontends publish on independent queues, so an edge or a fix can
+//! overtake its keyframe. It waits here, keyed by the missing id, until the
 //! keyframe arrives, the wait exceeds a timeout, or the buffer is full.
 
-use crate::engine::EdgeInput;
 use crate::graph::KeyframeId;
 use crate::wire::Origin;
 use std::collections::HashMap;
 use std::time::{Duration, Instant};
 
-/// One waiting edge.
+/// One waiting message.
 #[derive(Clone, Copy, Debug)]
-pub struct HeldEdge {
+pub struct Waiting<T> {
     /// Who sent it.
     pub origin: Origin,
-    /// The edge.
-    pub edge: EdgeInput,
+    /// The edge or fix.
+    pub item: T,
     /// When it started waiting.
     pub since: Instant,
 }
 
-/// Edges by the keyframe they wait for, with a cap on the total.
-#[derive(Debug, Default)]
-pub struct Held {
-    by_missing: HashMap<KeyframeId, Vec<HeldEdge>>,
+/// Messages by the keyframe they wait for, with a cap on the total.
+#[derive(Debug)]
+pub struct Held<T> {
+    by_missing: HashMap<KeyframeId, Vec<Waiting<T>>>,
     count: usize,
 }
 
-impl Held {
-    /// Number of waiting edges.
+impl<T> Default for Held<T> {
+    fn default() -> Self {
+        Self {
+            by_missing: HashMap::new(),
+            count: 0,
+        }
+    }
+}
+
+impl<T: Copy> Held<T> {
+    /// Number of waiting messages.
     pub fn len(&self) -> usize {
         self.count
     }
 
-    /// Parks `edge` until `missing` arrives; false (and nothing stored)
-    /// when `cap` are already waiting.
-    pub fn hold(&mut self, missing: KeyframeId, edge: HeldEdge, cap: usize) -> bool {
+    /// Parks `w` until `missing` arrives; false (and nothing stored) when
+    /// `cap` are already waiting.
+    pub fn hold(&mut self, missing: KeyframeId, w: Waiting<T>, cap: usize) -> bool {
         if self.count >= cap {
             return false;
         }
-        self.by_missing.entry(missing).or_default().push(edge);
+        self.by_missing.entry(missing).or_default().push(w);
         self.count += 1;
         true
     }
 
-    /// The edges waiting for keyframe `id`.
-    pub fn release(&mut self, id: KeyframeId) -> Vec<HeldEdge> {
+    /// The messages waiting for keyframe `id`.
+    pub fn release(&mut self, id: KeyframeId) -> Vec<Waiting<T>> {
         let out = self.by_missing.remove(&id).unwrap_or_default();
         self.count -= out.len();
         out
     }
 
-    /// Removes and returns the edges that have waited longer than `limit`,
-    /// with the id each waited for.
-    pub fn expire(&mut self, now: Instant, limit: Duration) -> Vec<(KeyframeId, HeldEdge)> {
+    /// Removes and returns the messages that have waited longer than
+    /// `limit`, with the id each waited for.
+    pub fn expire(&mut self, now: Instant, limit: Duration) -> Vec<(KeyframeId, Waiting<T>)> {
         let mut out = Vec::new();
         self.by_missing.retain(|&id, list| {
             list.retain(|h| {
@@ -74,16 +83,17 @@ impl Held {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::engine::EdgeInput;
     use crate::geometry::Pose2;
     use crate::graph::{EdgeKind, Information};
 
-    fn held(at: Instant) -> HeldEdge {
-        HeldEdge {
+    fn held(at: Instant) -> Waiting<EdgeInput> {
+        Waiting {
             origin: Origin {
                 frontend: 1,
                 sequence: 1,
             },
-            edge: EdgeInput::new(1, 2, Pose2::IDENTITY, Information::identity(), EdgeKind::Odometry),
+            item: EdgeInput::new(1, 2, Pose2::IDENTITY, Information::identity(), EdgeKind::Odometry),
             since: at,
         }
     }

@@ -98,7 +98,10 @@ pub fn serve_until(config: &Config, stop: &AtomicBool) -> Result<Counters, Serve
                 Ok((o, e)) => Msg::Edge(o, e),
                 Err(r) => Msg::Rejected(r),
             },
-            Wake::Input(Input::Gps(_)) => return true,
+            Wake::Input(Input::Gps(m)) => match wire::gps_in(&m) {
+                Ok((o, f)) => Msg::Gps(o, f),
+                Err(r) => Msg::Rejected(r),
+            },
             Wake::Drained => Msg::Drained,
             Wake::Tick if stop.load(Ordering::Relaxed) => return false,
             Wake::Tick => Msg::Tick,

@@ -13,5 +13,5 @@ pub mod system;
 pub mod two_stage;
 pub mod virtual_frame;
 
-pub use system::{LinearSystem, Var};
+pub use system::{LinearSystem, Var, MAX_TERMS};
 pub use virtual_frame::Pivot;

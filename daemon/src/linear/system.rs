@@ -19,11 +19,15 @@ pub enum Var {
     Fixed(c64),
 }
 
-/// One weighted row with at most three terms.
+/// Most free terms a row holds (a GPS triangle through paper A's virtual
+/// points has six).
+pub const MAX_TERMS: usize = 6;
+
+/// One weighted row with at most [`MAX_TERMS`] terms.
 #[derive(Clone, Copy, Debug)]
 struct Row<T> {
-    cols: [usize; 3],
-    coefs: [T; 3],
+    cols: [usize; MAX_TERMS],
+    coefs: [T; MAX_TERMS],
     len: usize,
     rhs: c64,
     weight: f64,
@@ -58,11 +62,11 @@ impl<T: Scalar> LinearSystem<T> {
     }
 
     /// Adds `Σ coef·var = rhs` with weight `w`; fixed variables move to the
-    /// right side. At most three free terms.
+    /// right side. At most [`MAX_TERMS`] free terms.
     pub fn push(&mut self, terms: &[(Var, T)], rhs: c64, weight: f64) {
         let mut row = Row {
-            cols: [0; 3],
-            coefs: [T::default(); 3],
+            cols: [0; MAX_TERMS],
+            coefs: [T::default(); MAX_TERMS],
             len: 0,
             rhs,
             weight,
@@ -85,6 +89,7 @@ impl<T: Scalar> LinearSystem<T> {
     /// Assembles `A = Σ w c̄ cᵀ` (upper triangle) and `b = Σ w c̄ y`.
     pub fn normal_equations(&self) -> (UpperCsc<T>, Vec<c64>) {
         let mut entries = Vec::with_capacity(self.rows.len() * 6 + self.n);
+        debug_assert!(self.rows.iter().all(|r| r.len <= MAX_TERMS));
         let mut b = vec![c64::new(0.0, 0.0); self.n];
         for row in &self.rows {
             for a in 0..row.len {

@@ -16,8 +16,9 @@
 use super::planar::PlanarSystem;
 use super::system::{LinearSystem, Var};
 use crate::geometry::Pose2;
+use crate::gps::{Georef, GpsInput};
 use crate::graph::{pose_ordering, Edge, PoseGraph};
-use crate::sparse::ordering::expand_blocks;
+use crate::sparse::ordering::{amd_of_pairs, expand_blocks};
 use crate::sparse::{FactorError, Ordering};
 use faer::c64;
 use nalgebra::Matrix2;
@@ -137,6 +138,66 @@ pub fn solve_positions(
         _ => position_system(graph, axes).solve(&Ordering::Custom(order.to_vec()))?,
     };
     Ok(with_gauge(c64::new(0.0, 0.0), x))
+}
+
+/// Both stages with GPS: paper A's triangle rows join the position stage,
+/// then, if `gps.absolute`, each fix's absolute position equation in the
+/// map frame of the georeference fitted to the positions so far (fitted,
+/// solved, refitted, solved). Returns the poses and the georeference.
+pub fn solve_gps(graph: &PoseGraph, gps: &GpsInput) -> Result<(Vec<Pose2>, Option<Georef>), FactorError> {
+    let order = pose_ordering(graph.len(), graph.edges());
+    let axes = solve_axes(graph, &order)?;
+    let zero = c64::new(0.0, 0.0);
+    let mut base = planar_position_system(graph, &axes);
+    let (fixes, triangles) = gps.triangles();
+    // triangles couple far-apart keyframes: order with them, or fill explodes
+    let couplings = triangles.iter().flat_map(|t| {
+        let (a, b, c) = (fixes[t.a].keyframe, fixes[t.b].keyframe, fixes[t.c].keyframe);
+        [(a, b), (b, c), (a, c)]
+    });
+    let free = graph
+        .edges()
+        .iter()
+        .map(|e| (e.from, e.to))
+        .chain(couplings)
+        .filter(|&(i, j)| i > 0 && j > 0)
+        .map(|(i, j)| (i - 1, j - 1));
+    let position_order = amd_of_pairs(graph.len().saturating_sub(1), free);
+    for t in &triangles {
+        let (a, b, c) = (fixes[t.a].keyframe, fixes[t.b].keyframe, fixes[t.c].keyframe);
+        let one = c64::new(1.0, 0.0);
+        base.push(
+            &[
+                (gauge_var(c, zero), one),
+                (gauge_var(b, zero), t.omega - one),
+                (gauge_var(a, zero), -t.omega),
+            ],
+            zero,
+            Matrix2::identity() * (gps.weight / t.variance),
+        );
+    }
+    let ordering = Ordering::Custom(expand_blocks(&position_order, 2));
+    let mut positions = with_gauge(zero, base.solve(&ordering)?);
+    let mut georef = None;
+    if gps.absolute {
+        for _ in 0..2 {
+            let Some(g) = gps.fit(&poses_from(&positions, &axes)) else {
+                break;
+            };
+            let mut system = base.clone();
+            for prior in gps.priors(&g) {
+                system.push(
+                    &[(gauge_var(prior.keyframe, zero), c64::new(1.0, 0.0))],
+                    prior.target,
+                    prior.information,
+                );
+            }
+            positions = with_gauge(zero, system.solve(&ordering)?);
+            georef = Some(g);
+        }
+        georef = gps.fit(&poses_from(&positions, &axes)).or(georef);
+    }
+    Ok((poses_from(&positions, &axes), georef))
 }
 
 /// Both stages with the default weights: the poses `(p_i, arg r_i)`.

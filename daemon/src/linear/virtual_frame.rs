@@ -23,6 +23,7 @@ use super::rotation::register;
 use super::scale::closed_form_scale;
 use super::system::{LinearSystem, Var};
 use crate::geometry::Pose2;
+use crate::gps::GpsInput;
 use crate::graph::PoseGraph;
 use crate::sparse::{FactorError, Ordering};
 use faer::c64;
@@ -95,9 +96,41 @@ pub fn system(graph: &PoseGraph, pivot: Pivot) -> LinearSystem<c64> {
     s
 }
 
+/// Adds paper A's GPS triangles, each through the positions
+/// `p_k = (k_y − i·k_x)/(1 − i)` of its keyframes' virtual points.
+pub fn push_gps(s: &mut LinearSystem<c64>, gps: &GpsInput) {
+    let (alpha, beta) = (ONE / (ONE - I), -I / (ONE - I));
+    let (fixes, triangles) = gps.triangles();
+    for t in &triangles {
+        let mut terms = Vec::with_capacity(6);
+        for (k, coef) in [
+            (fixes[t.c].keyframe, ONE),
+            (fixes[t.b].keyframe, t.omega - ONE),
+            (fixes[t.a].keyframe, -t.omega),
+        ] {
+            terms.push((point(k, true), coef * alpha));
+            terms.push((point(k, false), coef * beta));
+        }
+        s.push(&terms, c64::new(0.0, 0.0), gps.weight / t.variance);
+    }
+}
+
 /// Solves paper A's formulation end to end.
 pub fn solve(graph: &PoseGraph, pivot: Pivot) -> Result<VirtualFrameSolution, FactorError> {
-    let x = system(graph, pivot).solve(&Ordering::Amd)?;
+    solve_with(graph, pivot, None)
+}
+
+/// Solves paper A's formulation, with its GPS triangles if given.
+pub fn solve_with(
+    graph: &PoseGraph,
+    pivot: Pivot,
+    gps: Option<&GpsInput>,
+) -> Result<VirtualFrameSolution, FactorError> {
+    let mut sys = system(graph, pivot);
+    if let Some(gps) = gps {
+        push_gps(&mut sys, gps);
+    }
+    let x = sys.solve(&Ordering::Amd)?;
     let virt = |k: usize, y: bool| match point(k, y) {
         Var::Fixed(v) => v,
         Var::Free(i) => x[i],

@@ -11,10 +11,10 @@
 //! values and refactorises.
 
 use super::params::LevenbergMarquardtParams;
+use super::prior::Problem;
 use super::structure::{gauge_first_blocks, HessianStructure};
 use crate::geometry::Pose2;
 use crate::graph::pose_ordering;
-use crate::graph::{chi2_of_edges, Edge};
 use crate::sparse::ordering::expand_blocks;
 use crate::sparse::{FactorError, Ordering, SparseCholesky, UpperCsc};
 
@@ -49,7 +49,7 @@ pub struct LmReport {
 
 /// Damped Gauss–Newton over the poses of a graph; pose 0 stays fixed.
 pub struct LevenbergMarquardt<'a> {
-    edges: &'a [Edge],
+    problem: Problem<'a>,
     structure: HessianStructure,
     factor: SparseCholesky<f64>,
     hessian: UpperCsc<f64>,
@@ -66,20 +66,21 @@ pub struct LevenbergMarquardt<'a> {
 }
 
 impl<'a> LevenbergMarquardt<'a> {
-    /// Prepares the polish of `edges` from `initial` (one pose per keyframe).
+    /// Prepares the polish of `problem` from `initial` (one pose per
+    /// keyframe).
     pub fn new(
-        edges: &'a [Edge],
+        problem: Problem<'a>,
         initial: Vec<Pose2>,
         params: LevenbergMarquardtParams,
     ) -> Result<Self, FactorError> {
         let n = initial.len();
-        let structure = HessianStructure::new(gauge_first_blocks(n), n.saturating_sub(1), edges);
+        let structure = HessianStructure::new(gauge_first_blocks(n), n.saturating_sub(1), problem.edges);
         let hessian = structure.pattern().clone();
-        let poses = pose_ordering(initial.len(), edges);
+        let poses = pose_ordering(initial.len(), problem.edges);
         let factor = SparseCholesky::analyze(&hessian, &Ordering::Custom(expand_blocks(&poses, 3)))?;
-        let chi2 = chi2_of_edges(edges, &initial);
+        let chi2 = problem.chi2(&initial);
         let mut lm = Self {
-            edges,
+            problem,
             damped: hessian.clone(),
             gradient: vec![0.0; structure.dim()],
             structure,
@@ -115,8 +116,14 @@ impl<'a> LevenbergMarquardt<'a> {
 
     /// Refills `H` and `g` at the current poses.
     fn linearize(&mut self) {
-        self.structure
-            .assemble(self.edges, &self.poses, &mut self.hessian, &mut self.gradient);
+        let p = &self.problem;
+        self.structure.assemble(
+            p.edges,
+            p.priors,
+            &self.poses,
+            &mut self.hessian,
+            &mut self.gradient,
+        );
     }
 
     /// One trial step: solve the damped system, keep the step if χ² drops.
@@ -152,7 +159,7 @@ impl<'a> LevenbergMarquardt<'a> {
                 }
             })
             .collect();
-        let new_chi2 = chi2_of_edges(self.edges, &candidate);
+        let new_chi2 = self.problem.chi2(&candidate);
         let predicted: f64 = (0..delta.len())
             .map(|i| delta[i] * (self.lambda * d[i] * delta[i] - self.gradient[i]))
             .sum();
@@ -208,11 +215,11 @@ impl<'a> LevenbergMarquardt<'a> {
     }
 }
 
-/// Polishes `initial` on `edges` to convergence.
+/// Polishes `initial` on `problem` to convergence.
 pub fn polish(
-    edges: &[Edge],
+    problem: Problem<'_>,
     initial: Vec<Pose2>,
     params: LevenbergMarquardtParams,
 ) -> Result<LmReport, FactorError> {
-    LevenbergMarquardt::new(edges, initial, params)?.optimize()
+    LevenbergMarquardt::new(problem, initial, params)?.optimize()
 }

@@ -10,6 +10,7 @@
 //! upper-triangular value array, or [`NONE`] when it falls below the
 //! diagonal or on a fixed keyframe.
 
+use super::prior::PositionPrior;
 use super::se2::linearize;
 use crate::geometry::Pose2;
 use crate::graph::Edge;
@@ -99,16 +100,36 @@ impl HessianStructure {
     }
 
     /// Fills `hessian` (same pattern) and `gradient` with `Σ Jᵀ Ω J` and
-    /// `Σ Jᵀ Ω e` of `edges` (those given to [`Self::new`]) at `poses`.
+    /// `Σ Jᵀ Ω e` of `edges` (those given to [`Self::new`]) and of `priors`
+    /// (which touch only diagonal blocks, always in the pattern) at `poses`.
     pub fn assemble(
         &self,
         edges: &[Edge],
+        priors: &[PositionPrior],
         poses: &[Pose2],
         hessian: &mut UpperCsc<f64>,
         gradient: &mut [f64],
     ) {
         hessian.values_mut().fill(0.0);
         gradient.fill(0.0);
+        for p in priors {
+            let b = self.block_of[p.keyframe];
+            if b == NONE {
+                continue;
+            }
+            let v = 3 * b as usize;
+            let e = poses[p.keyframe].position() - p.target;
+            let g = p.information * nalgebra::Vector2::new(e.re, e.im);
+            gradient[v] += g[0];
+            gradient[v + 1] += g[1];
+            for (r, c) in [(0, 0), (0, 1), (1, 1)] {
+                let s = self
+                    .pattern
+                    .slot(v + r, v + c)
+                    .expect("diagonal blocks are in the pattern");
+                hessian.values_mut()[s] += p.information[(r, c)];
+            }
+        }
         let values = hessian.values_mut();
         for (k, edge) in edges.iter().enumerate() {
             let (h, g) = local_system(edge, &poses[edge.from], &poses[edge.to]);

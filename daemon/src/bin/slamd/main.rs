@@ -3,6 +3,7 @@
 mod cli;
 mod demo;
 mod eval;
+mod gps;
 mod replay;
 mod run;
 mod solve;

@@ -11,8 +11,9 @@
 use crate::solve::file_name;
 use anyhow::{bail, Context};
 use clap::Args;
+use faer::c64;
 use slamd::config::Config;
-use slamd::engine::{EdgeInput, Engine, EngineConfig, SnapshotSource};
+use slamd::engine::{EdgeInput, Engine, EngineConfig, FixInput, SnapshotSource};
 use slamd::geometry::Pose2;
 use slamd::graph::{chi2, KeyframeId, PoseGraph};
 use slamd::io;
@@ -58,6 +59,8 @@ pub struct ReplayOpts {
     /// Keyframes kept last in a fresh ordering (--embedded).
     #[arg(long)]
     pub recent_last: Option<usize>,
+    #[command(flatten)]
+    pub gps: crate::gps::GpsOpts,
     /// Write one line per keyframe (`k chi2 latency_us`).
     #[arg(long)]
     pub trace: Option<PathBuf>,
@@ -101,14 +104,9 @@ impl Latency {
 
 /// Where a replay sends its keyframes.
 pub trait Sink {
-    /// Sends keyframe `id` with its edges; returns latencies (µs) of the
-    /// keyframes whose snapshot arrived meanwhile, with their index.
-    fn keyframe(
-        &mut self,
-        k: usize,
-        id: KeyframeId,
-        edges: &[EdgeInput],
-    ) -> anyhow::Result<Vec<(usize, f64)>>;
+    /// Sends keyframe `k` with its edges and fixes; returns latencies (µs)
+    /// of the keyframes whose snapshot arrived meanwhile, with their index.
+    fn keyframe(&mut self, k: usize, step: &Step) -> anyhow::Result<Vec<(usize, f64)>>;
     /// Waits for every outstanding snapshot; returns their latencies.
     fn drain(&mut self) -> anyhow::Result<Vec<(usize, f64)>>;
     /// The current estimate, by keyframe id.
@@ -116,6 +114,9 @@ pub trait Sink {
     /// The final estimate after the re-solve that ends the stream, with the
     /// number of re-solves.
     fn finish(&mut self) -> anyhow::Result<(HashMap<KeyframeId, Pose2>, usize)>;
+    /// The georeferenced (east, north) of each keyframe; empty until GPS
+    /// has georeferenced the map.
+    fn enu(&mut self) -> anyhow::Result<HashMap<KeyframeId, c64>>;
     /// "embedded" or "daemon".
     fn mode(&self) -> &'static str;
 }
@@ -124,19 +125,17 @@ pub trait Sink {
 pub struct EmbeddedSink(pub Engine);
 
 impl Sink for EmbeddedSink {
-    fn keyframe(
-        &mut self,
-        k: usize,
-        id: KeyframeId,
-        edges: &[EdgeInput],
-    ) -> anyhow::Result<Vec<(usize, f64)>> {
-        self.0.add_keyframe(id, None)?;
+    fn keyframe(&mut self, k: usize, step: &Step) -> anyhow::Result<Vec<(usize, f64)>> {
+        self.0.add_keyframe(step.id, None)?;
         let arrival = Instant::now();
-        for e in edges {
+        for e in &step.edges {
             self.0.add_edge(*e)?;
         }
+        for f in &step.fixes {
+            self.0.add_gps(*f)?;
+        }
         self.0.update();
-        Ok(if edges.is_empty() {
+        Ok(if step.edges.is_empty() {
             vec![]
         } else {
             vec![(k, arrival.elapsed().as_secs_f64() * 1e6)]
@@ -154,6 +153,11 @@ impl Sink for EmbeddedSink {
     fn finish(&mut self) -> anyhow::Result<(HashMap<KeyframeId, Pose2>, usize)> {
         self.0.resolve_now();
         Ok((self.poses()?, self.0.stats().resolves))
+    }
+
+    fn enu(&mut self) -> anyhow::Result<HashMap<KeyframeId, c64>> {
+        let snap = self.0.snapshot();
+        Ok(snap.enu_poses().map(|(id, p)| (id, p.position())).collect())
     }
 
     fn mode(&self) -> &'static str {
@@ -219,12 +223,7 @@ impl DaemonSink {
 }
 
 impl Sink for DaemonSink {
-    fn keyframe(
-        &mut self,
-        k: usize,
-        id: KeyframeId,
-        edges: &[EdgeInput],
-    ) -> anyhow::Result<Vec<(usize, f64)>> {
+    fn keyframe(&mut self, k: usize, step: &Step) -> anyhow::Result<Vec<(usize, f64)>> {
         let mut done = Vec::new();
         if let Some((start, period)) = self.pace {
             // paced: take in snapshots until this keyframe's slot
@@ -234,12 +233,15 @@ impl Sink for DaemonSink {
             }
         }
         let arrival = Instant::now();
-        let mut last = self.frontend.add_keyframe(id, 0, None)?;
-        for e in edges {
+        let mut last = self.frontend.add_keyframe(step.id, 0, None)?;
+        for e in &step.edges {
             last = self.frontend.add_edge(e)?;
         }
+        for f in &step.fixes {
+            last = self.frontend.add_gps(f)?;
+        }
         self.frontend.flush()?;
-        if !edges.is_empty() {
+        if !step.edges.is_empty() {
             self.pending.push_back((k, last, arrival));
         }
         if self.pace.is_none() {
@@ -290,14 +292,38 @@ impl Sink for DaemonSink {
         Ok((self.poses()?, resolves))
     }
 
+    fn enu(&mut self) -> anyhow::Result<HashMap<KeyframeId, c64>> {
+        let s = self.latest.as_ref().ok_or_else(|| self.no_answer())?;
+        if s.header().georeferenced == 0 {
+            return Ok(HashMap::new());
+        }
+        Ok(s.poses()
+            .iter()
+            .map(|p| (p.id, c64::new(p.east, p.north)))
+            .collect())
+    }
+
     fn mode(&self) -> &'static str {
         "daemon"
     }
 }
 
+/// One keyframe of a replay, with what arrives with it.
+pub struct Step {
+    pub id: KeyframeId,
+    /// The edges whose newer end it is.
+    pub edges: Vec<EdgeInput>,
+    /// The GPS fixes taken at it.
+    pub fixes: Vec<FixInput>,
+}
+
 /// A graph's keyframes in order, each with the edges that it makes
-/// available (its newer end), as engine inputs.
-pub fn stream(graph: &PoseGraph) -> Vec<(KeyframeId, Vec<EdgeInput>)> {
+/// available (its newer end) and its fixes, as engine inputs.
+pub fn stream(graph: &PoseGraph, fixes: &[FixInput]) -> Vec<Step> {
+    let mut by_id: HashMap<KeyframeId, Vec<FixInput>> = HashMap::new();
+    for f in fixes {
+        by_id.entry(f.keyframe).or_default().push(*f);
+    }
     let mut groups = vec![Vec::new(); graph.len()];
     for e in graph.time_order() {
         let edge = graph.edges()[e];
@@ -312,13 +338,22 @@ pub fn stream(graph: &PoseGraph) -> Vec<(KeyframeId, Vec<EdgeInput>)> {
     groups
         .into_iter()
         .enumerate()
-        .map(|(k, g)| (graph.id_of(k), g))
+        .map(|(k, edges)| {
+            let id = graph.id_of(k);
+            Step {
+                id,
+                edges,
+                fixes: by_id.remove(&id).unwrap_or_default(),
+            }
+        })
         .collect()
 }
 
 /// What a replay measured.
 pub struct Outcome {
     pub latencies: Vec<f64>,
+    /// Georeferenced (east, north) of the final estimate, by keyframe id.
+    pub enu: HashMap<KeyframeId, c64>,
     pub trace: Vec<(usize, f64)>,
     pub total_s: f64,
     pub resolves: usize,
@@ -329,6 +364,7 @@ pub struct Outcome {
 /// Streams `graph` into `sink`; `progress` is told of each keyframe.
 pub fn replay(
     graph: &PoseGraph,
+    fixes: &[FixInput],
     sink: &mut dyn Sink,
     checkpoints: &[usize],
     mut progress: impl FnMut(usize),
@@ -336,8 +372,8 @@ pub fn replay(
     let mut latencies = Vec::with_capacity(graph.len());
     let mut checked = Vec::new();
     let start = Instant::now();
-    for (k, (id, edges)) in stream(graph).iter().enumerate() {
-        latencies.extend(sink.keyframe(k, *id, edges)?);
+    for (k, step) in stream(graph, fixes).iter().enumerate() {
+        latencies.extend(sink.keyframe(k, step)?);
         if checkpoints.contains(&k) {
             latencies.extend(sink.drain()?);
             let by_id = sink.poses()?;
@@ -352,6 +388,7 @@ pub fn replay(
     latencies.extend(sink.drain()?);
     let (by_id, resolves) = sink.finish()?;
     let total_s = start.elapsed().as_secs_f64();
+    let enu = sink.enu()?;
     let poses = graph
         .keyframes()
         .iter()
@@ -365,6 +402,7 @@ pub fn replay(
         })?;
     latencies.sort_by_key(|&(k, _)| k);
     Ok(Outcome {
+        enu,
         trace: latencies.clone(),
         latencies: latencies.into_iter().map(|(_, l)| l).collect(),
         total_s,
@@ -399,7 +437,15 @@ pub fn run(opts: ReplayOpts) -> anyhow::Result<()> {
             opts.rate,
         )?)
     };
-    let out = replay(&graph, sink.as_mut(), &checkpoints, |_| {})?;
+    let gps = crate::gps::load(&opts.gps, &graph)?;
+    let fixes = gps.as_ref().map_or(&[][..], |g| &g.wire[..]);
+    let out = replay(&graph, fixes, sink.as_mut(), &checkpoints, |_| {})?;
+    let enu_rmse = gps.as_ref().and_then(|g| {
+        let enu: HashMap<usize, c64> = (out.enu.iter())
+            .filter_map(|(id, p)| Some((graph.index_of(*id)?, *p)))
+            .collect();
+        crate::gps::rmse(&g.truth, |k| enu.get(&k).copied())
+    });
     if let Some(path) = &opts.trace {
         let lines: Vec<String> = out.trace.iter().map(|(k, l)| format!("{k} {l:.1}")).collect();
         std::fs::write(path, lines.join("\n") + "\n")
@@ -443,6 +489,9 @@ pub fn run(opts: ReplayOpts) -> anyhow::Result<()> {
             "ate": ate,
             "prefixes_checked": out.checked.len(),
             "worst_prefix_ratio": worst_ratio,
+            "gps_fixes": fixes.len(),
+            "georeferenced": !out.enu.is_empty(),
+            "enu_rmse": enu_rmse,
         });
         println!("{v}");
     } else {
@@ -465,6 +514,9 @@ pub fn run(opts: ReplayOpts) -> anyhow::Result<()> {
         if let Some(a) = ate {
             println!("ate                   {a:.4} m");
         }
+        if let Some(e) = enu_rmse {
+            println!("enu rmse              {e:.4} m  ({} fixes)", fixes.len());
+        }
         if let Some(w) = worst_ratio {
             println!(
                 "worst snapshot/prefix-optimum chi2 over {} prefixes: {w:.4}",
@@ -476,7 +528,7 @@ pub fn run(opts: ReplayOpts) -> anyhow::Result<()> {
 }
 
 fn engine_config(opts: &ReplayOpts, config: &Config) -> EngineConfig {
-    let mut c = config.engine.clone();
+    let mut c = config.engine();
     if let Some(n) = opts.resolve_every {
         c.resolve_every_edges = n;
     }
@@ -486,5 +538,9 @@ fn engine_config(opts: &ReplayOpts, config: &Config) -> EngineConfig {
     if let Some(r) = opts.recent_last {
         c.recent_last = r;
     }
+    if let Some(o) = opts.gps.gps_origin {
+        c.gps.origin = Some(o);
+    }
+    c.gps.absolute = !opts.gps.gps_paper_only;
     c
 }

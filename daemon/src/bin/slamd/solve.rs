@@ -27,21 +27,31 @@ pub struct SolveOpts {
     /// Draw the estimate over the ground truth and the initial guess.
     #[arg(long)]
     pub plot: Option<PathBuf>,
+    /// Drop every loop closure: odometry alone (with --gps: odometry and GPS).
+    #[arg(long)]
+    pub odometry_only: bool,
+    #[command(flatten)]
+    pub gps: crate::gps::GpsOpts,
     /// Print one JSON object instead of a table.
     #[arg(long)]
     pub json: bool,
 }
 
 pub fn run(opts: SolveOpts) -> anyhow::Result<()> {
-    let graph = io::read_graph(&opts.file)?;
+    let mut graph = io::read_graph(&opts.file)?;
+    if opts.odometry_only {
+        graph = odometry_only(&graph);
+    }
     let truth = opts
         .ground_truth
         .as_deref()
         .map(io::read_ground_truth)
         .transpose()?;
+    let gps = crate::gps::load(&opts.gps, &graph)?;
     let options = BatchOptions {
         formulation: opts.formulation,
         polish: opts.polish,
+        gps: gps.as_ref().map(|g| g.input.clone()),
         ..Default::default()
     };
     let sol = solve_batch(&graph, &options).with_context(|| format!("solving {}", opts.file.display()))?;
@@ -87,6 +97,9 @@ pub fn run(opts: SolveOpts) -> anyhow::Result<()> {
     }
 
     let iterations = sol.polish.as_ref().map(|r| r.iterations.len());
+    let enu_rmse = gps
+        .as_ref()
+        .and_then(|g| crate::gps::enu_rmse(g, sol.georef.as_ref(), &sol.poses));
     if opts.json {
         let v = serde_json::json!({
             "file": opts.file.display().to_string(),
@@ -103,6 +116,9 @@ pub fn run(opts: SolveOpts) -> anyhow::Result<()> {
             "iterations": iterations,
             "rho": sol.rho,
             "median_axis_length": sol.median_axis_length,
+            "gps_fixes": gps.as_ref().map(|g| g.input.fixes.len()),
+            "georeferenced": sol.georef.is_some(),
+            "enu_rmse": enu_rmse,
         });
         println!("{v}");
     } else {
@@ -130,6 +146,16 @@ pub fn run(opts: SolveOpts) -> anyhow::Result<()> {
         if let Some(a) = ate {
             println!("ate            {:.4} m  over {} keyframes", a.rmse, a.matched);
         }
+        if let Some(g) = &gps {
+            println!(
+                "gps            {} fixes, georeferenced: {}",
+                g.input.fixes.len(),
+                sol.georef.is_some()
+            );
+        }
+        if let Some(e) = enu_rmse {
+            println!("enu rmse       {e:.4} m  (georeferenced positions vs the fixes' true ENU)");
+        }
         println!("seconds        {:.4}", sol.seconds());
     }
     Ok(())
@@ -148,6 +174,17 @@ fn write_result(
         io::write_pose_table(&mut w, graph, poses)?;
     }
     Ok(())
+}
+
+/// The graph without its loop closures.
+pub fn odometry_only(graph: &PoseGraph) -> PoseGraph {
+    let edges = graph
+        .edges()
+        .iter()
+        .filter(|e| e.kind == slamd::graph::EdgeKind::Odometry)
+        .copied()
+        .collect();
+    PoseGraph::from_parts(graph.keyframes().to_vec(), edges).expect("same keyframes")
 }
 
 pub fn file_name(p: &std::path::Path) -> String {

@@ -1,0 +1,253 @@
+//! GPS: fixes in a local metric frame, paper A's similar triangles, and
+//! georeferencing.
+//!
+//! - [`local_frame`]: WGS84 latitude/longitude/height to the local
+//!   east-north-up tangent plane at an origin (x east, y north, REP-103).
+//! - [`triangles`]: paper A §4.2's equations between fixes: adjacent triples
+//!   and seeded wide triangles, each `p_c − p_b = ω (p_a − p_b)` with ω the
+//!   complex ratio of the GPS vectors. They fix shape only.
+//! - [`georef`]: the map→ENU rigid motion fitted to the GPS-tagged poses,
+//!   which turns each fix into an absolute position equation in the map
+//!   frame: what corrects drift at its true scale and georeferences the map.
+
+pub mod georef;
+pub mod local_frame;
+pub mod triangles;
+
+pub use georef::Georef;
+pub use local_frame::{Geodetic, LocalFrame};
+pub use triangles::{Triangle, TriangleParams};
+
+use crate::geometry::Pose2;
+use crate::nonlinear::PositionPrior;
+use faer::c64;
+use nalgebra::Matrix2;
+
+/// The `[gps]` settings.
+///
+/// ```toml
+/// [gps]
+/// origin = "45.5138,9.2110"   # LAT,LON[,HEIGHT] of the ENU frame; default: the first fix
+/// absolute = true             # georeference: absolute position equations
+/// calibrate = true            # weigh fixes by the graph's variance factor
+/// [gps.triangles]             # paper A's rules
+/// eps = 0.5
+/// p_thres = 3.0
+/// delta_req = 200
+/// f_max = 20000
+/// seed = 1
+/// ```
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct GpsConfig {
+    /// Origin of the local ENU frame (default: the first fix).
+    pub origin: Option<Geodetic>,
+    /// Add absolute position equations (see [`GpsInput::absolute`]).
+    pub absolute: bool,
+    /// Weigh fixes by the graph's variance factor ([`variance_factor`]).
+    pub calibrate: bool,
+    /// Paper A's triangle rules.
+    pub triangles: TriangleParams,
+}
+
+impl Default for GpsConfig {
+    fn default() -> Self {
+        Self {
+            origin: None,
+            absolute: true,
+            calibrate: true,
+            triangles: TriangleParams::default(),
+        }
+    }
+}
+
+/// The fixes of a solve and what to make of them.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct GpsInput {
+    /// The fixes, any order.
+    pub fixes: Vec<GpsFix>,
+    /// Paper A's triangle rules.
+    pub triangles: TriangleParams,
+    /// Also add absolute position equations (georeferencing), beyond the
+    /// paper's shape-only triangles.
+    pub absolute: bool,
+    /// Multiplies every GPS weight: the graph's a-posteriori variance
+    /// factor ([`variance_factor`]), so that edges and fixes weigh in the
+    /// same units. 1 trusts the edges' information as given.
+    pub weight: f64,
+    /// Set `weight` from the graph's own χ² before solving.
+    pub calibrate: bool,
+}
+
+impl GpsInput {
+    /// Fixes with the default rules and absolute equations.
+    pub fn new(fixes: Vec<GpsFix>) -> Self {
+        Self::with_config(fixes, &GpsConfig::default())
+    }
+
+    /// Fixes with the rules of `config`.
+    pub fn with_config(fixes: Vec<GpsFix>, config: &GpsConfig) -> Self {
+        Self {
+            fixes,
+            triangles: config.triangles,
+            absolute: config.absolute,
+            weight: 1.0,
+            calibrate: config.calibrate,
+        }
+    }
+
+    /// The fixes in keyframe (time) order.
+    pub fn ordered(&self) -> Vec<GpsFix> {
+        let mut f = self.fixes.clone();
+        f.sort_by_key(|f| f.keyframe);
+        f
+    }
+
+    /// Paper A's equations: adjacent triples, then wide triangles; the
+    /// indices refer to [`Self::ordered`].
+    pub fn triangles(&self) -> (Vec<GpsFix>, Vec<Triangle>) {
+        let fixes = self.ordered();
+        let mut t = triangles::adjacent(&fixes, &self.triangles);
+        t.extend(triangles::wide(&fixes, &self.triangles));
+        (fixes, t)
+    }
+
+    /// The map→ENU motion fitted to `poses`, weighting each fix by its
+    /// inverse variance.
+    pub fn fit(&self, poses: &[Pose2]) -> Option<Georef> {
+        let pairs: Vec<_> = self
+            .fixes
+            .iter()
+            .map(|f| (poses[f.keyframe].position(), f.enu, 1.0 / f.variance()))
+            .collect();
+        Georef::fit(&pairs)
+    }
+
+    /// Each fix as a position prior in the map frame of `georef`.
+    pub fn priors(&self, georef: &Georef) -> Vec<PositionPrior> {
+        self.fixes.iter().map(|f| f.prior(georef, self.weight)).collect()
+    }
+}
+
+/// Redundancy below which a graph's χ² says too little about its noise.
+pub const MIN_REDUNDANCY: usize = 30;
+
+/// The a-posteriori variance factor `σ̂₀² = χ² / r` of a solved pose graph,
+/// `r = 3(m − n + 1)` its redundancy (m edges, n keyframes, connected).
+///
+/// Scaling every edge's information by one factor leaves the graph's
+/// optimum unchanged, so datasets are often published with information that
+/// is only right up to a factor (City10000's optimum χ² is 512 where a
+/// consistent model gives about r = 32,064). A fix with a true σ then weighs
+/// wrongly against the edges; multiplying GPS weights by `σ̂₀²` restores the
+/// balance (Helmert's variance-component estimate with one group). Returns
+/// 1 when `r < MIN_REDUNDANCY` (odometry alone has r = 0), and clamps to
+/// `[1e-4, 1e4]`.
+pub fn variance_factor(chi2: f64, edges: usize, keyframes: usize) -> f64 {
+    let r = 3 * (edges + 1).saturating_sub(keyframes);
+    if r < MIN_REDUNDANCY || !chi2.is_finite() {
+        return 1.0;
+    }
+    (chi2 / r as f64).clamp(1e-4, 1e4)
+}
+
+/// A fix attached to a keyframe, in the local ENU frame.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GpsFix {
+    /// Index of the keyframe in its graph.
+    pub keyframe: usize,
+    /// East + i·north (m).
+    pub enu: c64,
+    /// Covariance of (east, north), m².
+    pub covariance: Matrix2<f64>,
+}
+
+impl GpsFix {
+    /// Mean variance per axis, `tr Σ / 2` (the σ² of paper A's equations).
+    pub fn variance(&self) -> f64 {
+        self.covariance.trace() / 2.0
+    }
+
+    /// The absolute position equation `p_k ≈ R⁻¹(enu − t)` in the map frame
+    /// of `georef`, its information `weight · (R⁻¹ Σ R)⁻¹`.
+    pub fn prior(&self, georef: &Georef, weight: f64) -> PositionPrior {
+        PositionPrior {
+            keyframe: self.keyframe,
+            target: georef.to_map(self.enu),
+            information: georef
+                .covariance_to_map(&self.covariance)
+                .try_inverse()
+                .unwrap_or_else(Matrix2::zeros)
+                * weight,
+        }
+    }
+}
+
+/// Why a fix was refused.
+#[derive(Clone, Debug, PartialEq)]
+#[non_exhaustive]
+pub enum GpsError {
+    /// A NaN or infinite number.
+    NonFinite,
+    /// |lat| > 90° or |lon| > 180°.
+    OutOfRange,
+    /// The covariance is not symmetric positive definite.
+    NotPositiveDefinite,
+}
+
+impl std::fmt::Display for GpsError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            GpsError::NonFinite => "GPS fix has a non-finite number",
+            GpsError::OutOfRange => "GPS fix is out of range (|lat| > 90 or |lon| > 180)",
+            GpsError::NotPositiveDefinite => "GPS covariance is not positive definite",
+        })
+    }
+}
+
+impl std::error::Error for GpsError {}
+
+/// Checks a 2×2 covariance (row-major): finite, symmetric, positive definite.
+pub fn covariance(c: [f64; 4]) -> Result<Matrix2<f64>, GpsError> {
+    if c.iter().any(|v| !v.is_finite()) {
+        return Err(GpsError::NonFinite);
+    }
+    let sym = (c[1] - c[2]).abs() <= 1e-12 * c[0].abs().max(c[3].abs()).max(1e-300);
+    if !(sym && c[0] > 0.0 && c[0] * c[3] - c[1] * c[2] > 0.0) {
+        return Err(GpsError::NotPositiveDefinite);
+    }
+    Ok(Matrix2::new(c[0], c[1], c[2], c[3]))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn variance_factor_is_chi2_over_redundancy() {
+        // 100 keyframes, 120 edges: r = 3 · 21 = 63
+        assert!((variance_factor(6.3, 120, 100) - 0.1).abs() < 1e-15);
+        // a chain has no redundancy: trust the information
+        assert_eq!(variance_factor(5.0, 99, 100), 1.0);
+        assert_eq!(variance_factor(0.0, 120, 100), 1e-4);
+        assert_eq!(variance_factor(f64::NAN, 120, 100), 1.0);
+    }
+
+    #[test]
+    fn covariances_are_checked() {
+        assert!(covariance([1.0, 0.0, 0.0, 2.0]).is_ok());
+        assert_eq!(covariance([1.0, 0.0, 0.0, f64::NAN]), Err(GpsError::NonFinite));
+        assert_eq!(
+            covariance([1.0, 2.0, 2.0, 1.0]),
+            Err(GpsError::NotPositiveDefinite)
+        );
+        assert_eq!(
+            covariance([1.0, 0.5, 0.0, 1.0]),
+            Err(GpsError::NotPositiveDefinite)
+        );
+        assert_eq!(
+            covariance([-1.0, 0.0, 0.0, 1.0]),
+            Err(GpsError::NotPositiveDefinite)
+        );
+    }
+}
