@@ -12,7 +12,8 @@
 //! information, the cost) → [`linear`] (initialisers without a guess: the
 //! two-stage formulation and paper A's virtual frames) → [`sparse`] (normal
 //! equations and faer's sparse Cholesky) → [`nonlinear`] (the
-//! Levenberg–Marquardt polish); [`gps`] adds fixes and georeferencing.
+//! Levenberg–Marquardt polish); [`gps`] adds fixes and georeferencing,
+//! [`outliers`] switches wrong loop closures off.
 //! [`solver`] chains them into a batch solve and
 //! [`eval`] measures the result.
 //!
@@ -60,6 +61,7 @@ pub mod io;
 pub mod ipc;
 pub mod linear;
 pub mod nonlinear;
+pub mod outliers;
 pub mod solver;
 pub mod sparse;
 pub mod synthetic;

@@ -2,9 +2,10 @@
 
 use crate::geometry::Pose2;
 use crate::gps::{variance_factor, Georef, GpsInput};
-use crate::graph::{chi2, GraphError, PoseGraph};
+use crate::graph::{chi2, Edge, EdgeKind, GraphError, PoseGraph};
 use crate::linear::{two_stage, virtual_frame, Pivot};
 use crate::nonlinear::{polish, LevenbergMarquardtParams, LmReport, Problem};
+use crate::outliers::{robust_polish, OutlierConfig};
 use crate::sparse::FactorError;
 use std::fmt;
 use std::str::FromStr;
@@ -106,6 +107,8 @@ pub struct BatchOptions {
     pub lm: LevenbergMarquardtParams,
     /// GPS fixes (keyframe indices of the graph being solved).
     pub gps: Option<GpsInput>,
+    /// Filter loop closures: the robust polish replaces the plain one.
+    pub robust: Option<OutlierConfig>,
 }
 
 /// What [`solve_batch`] found.
@@ -129,6 +132,8 @@ pub struct BatchSolution {
     pub median_axis_length: Option<f64>,
     /// The map→ENU motion, when GPS was given (and had two distinct fixes).
     pub georef: Option<Georef>,
+    /// With `robust`: the final switch of each edge (file order).
+    pub switches: Option<Vec<f64>>,
 }
 
 impl BatchSolution {
@@ -171,7 +176,35 @@ pub fn solve_batch(graph: &PoseGraph, options: &BatchOptions) -> Result<BatchSol
     }
     let linear_seconds = start.elapsed().as_secs_f64();
     let linear_chi2 = chi2(graph, &poses);
-    let (poses, polish_report, polish_seconds) = if options.polish {
+    let mut switches = None;
+    let (poses, polish_report, polish_seconds) = if let Some(filter) = &options.robust {
+        // from the linear solution and from odometry alone (which no wrong
+        // loop closure bends), the lower robust cost wins
+        let start = Instant::now();
+        let switchable: Vec<bool> = graph.edges().iter().map(|e| filter.switchable(e)).collect();
+        let mut starts = vec![poses.clone()];
+        starts.extend(odometry_chain(graph));
+        let sol = robust_polish(graph.edges(), &switchable, starts, filter, options.lm)?;
+        let mut poses = sol.poses;
+        if let Some(gps) = gps.filter(|g| g.absolute) {
+            let edges: Vec<Edge> = (graph.edges().iter().zip(&sol.switches))
+                .map(|(e, s)| Edge {
+                    information: e.information.scaled(s * s),
+                    ..*e
+                })
+                .collect();
+            for _ in 0..2 {
+                let Some(g) = gps.fit(&poses) else {
+                    break;
+                };
+                let priors = gps.priors(&g);
+                poses = polish(Problem::new(&edges, &priors), poses, options.lm)?.poses;
+                georef = gps.fit(&poses);
+            }
+        }
+        switches = Some(sol.switches);
+        (poses, None, start.elapsed().as_secs_f64())
+    } else if options.polish {
         let start = Instant::now();
         let mut report = polish(Problem::edges(graph.edges()), poses.clone(), options.lm)?;
         if let Some(gps) = gps.filter(|g| g.absolute) {
@@ -182,10 +215,7 @@ pub fn solve_batch(graph: &PoseGraph, options: &BatchOptions) -> Result<BatchSol
                     break;
                 };
                 let priors = gps.priors(&g);
-                let problem = Problem {
-                    edges: graph.edges(),
-                    priors: &priors,
-                };
+                let problem = Problem::new(graph.edges(), &priors);
                 report = polish(problem, report.poses.clone(), options.lm)?;
                 georef = gps.fit(&report.poses);
             }
@@ -205,7 +235,15 @@ pub fn solve_batch(graph: &PoseGraph, options: &BatchOptions) -> Result<BatchSol
         rho,
         median_axis_length,
         georef,
+        switches,
     })
+}
+
+/// Poses composed along odometry alone, when odometry links every keyframe.
+fn odometry_chain(graph: &PoseGraph) -> Option<Vec<Pose2>> {
+    let odometry = graph.edges().iter().filter(|e| e.kind == EdgeKind::Odometry);
+    let chain = PoseGraph::from_parts(graph.keyframes().to_vec(), odometry.copied().collect()).ok()?;
+    chain.compose_spanning_tree().ok()
 }
 
 /// `gps` with its weight set to the graph's variance factor (without GPS,

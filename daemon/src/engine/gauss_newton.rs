@@ -74,7 +74,7 @@ impl GaussNewton {
         let structure = HessianStructure::new(block_of.clone(), order.len(), &scaled);
         let mut h = structure.pattern().clone();
         let mut g = vec![0.0; structure.dim()];
-        structure.assemble(&scaled, priors, &lin, &mut h, &mut g);
+        structure.assemble(&scaled, None, priors, &lin, &mut h, &mut g);
         let identity: Vec<usize> = (0..h.n()).collect();
         let factor = DynamicLdlt::from_matrix(&h, &identity)?;
         let chol = IncrementalCholesky::new(factor, g.iter().map(|v| -v).collect());
@@ -83,11 +83,7 @@ impl GaussNewton {
             .map(|&b| if b == NONE { NONE } else { 3 * b })
             .collect();
         let keyframe_of = order.iter().flat_map(|&k| [k as u32; 3]).collect();
-        let lin_chi2 = Problem {
-            edges: &scaled,
-            priors,
-        }
-        .chi2(&lin);
+        let lin_chi2 = Problem::new(&scaled, priors).chi2(&lin);
         let mut gn = Self {
             column,
             keyframe_of,

@@ -56,6 +56,7 @@ use crate::geometry::Pose2;
 use crate::gps::{covariance, Geodetic, GpsConfig, GpsError, GpsFix, LocalFrame};
 use crate::graph::{EdgeKind, GraphError, Information, KeyframeId};
 use crate::nonlinear::LevenbergMarquardtParams;
+use crate::outliers::OutlierConfig;
 use crate::sparse::dynamic::UpdateError;
 use faer::c64;
 use resolve::Job;
@@ -178,6 +179,8 @@ pub struct EngineConfig {
     pub linear_stages: bool,
     /// The polish of each re-solve.
     pub polish: LevenbergMarquardtParams,
+    /// The outlier filter of loop closures.
+    pub outliers: OutlierConfig,
     /// GPS: the ENU origin and how fixes weigh (the configuration's `[gps]`
     /// section; see [`Config::engine`](crate::config::Config::engine)).
     #[serde(skip)]
@@ -196,6 +199,7 @@ impl Default for EngineConfig {
             snapshot: SnapshotSource::default(),
             linear_stages: false,
             polish: LevenbergMarquardtParams::default(),
+            outliers: OutlierConfig::default(),
             gps: GpsConfig::default(),
         }
     }
@@ -250,7 +254,7 @@ impl Engine {
     /// An empty engine.
     pub fn new(config: EngineConfig) -> Self {
         Self {
-            state: State::new(config.snapshot, config.linear_stages),
+            state: State::new(&config),
             job: None,
             log: Vec::new(),
             seq: 0,
@@ -351,6 +355,7 @@ impl Engine {
             self.stats.nonlinear_resolves += 1;
             tracing::debug!(
                 chi2 = self.state.chi2(),
+                predicted = self.state.predicted_chi2(),
                 "Linearisation failed; re-solving inline."
             );
             moved = self.resolve_inline();
@@ -419,9 +424,17 @@ impl Engine {
         &self.state.model.graph
     }
 
-    /// Current weight of each edge.
+    /// Current weight of each edge (as set by [`Self::set_edge_weight`]).
     pub fn edge_weights(&self) -> &[f64] {
         &self.state.model.scale
+    }
+
+    /// The outlier filter's switch `s ∈ [0, 1]` of each edge, by index:
+    /// 1 for odometry, below [`REJECTED_BELOW`](crate::outliers::REJECTED_BELOW)
+    /// for a loop closure the filter holds wrong. The edge's information
+    /// counts `s²` times.
+    pub fn switches(&self) -> &[f64] {
+        &self.state.model.switch
     }
 
     /// Work counters.
@@ -537,18 +550,8 @@ impl Engine {
     }
 
     fn rebuild_inline(&mut self, polish: bool) {
-        let c = &self.config;
-        let lm = polish.then_some(&c.polish);
         let (model, start) = (self.state.model().clone(), self.state.estimate());
-        match State::rebuild(
-            model,
-            start,
-            lm,
-            &c.gps,
-            c.recent_last,
-            c.snapshot,
-            c.linear_stages,
-        ) {
+        match State::rebuild(model, start, polish, &self.config) {
             Ok(state) => {
                 self.state = state;
                 self.after_resolve();

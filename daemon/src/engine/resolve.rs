@@ -84,15 +84,7 @@ impl Job {
 pub fn run(model: Model, estimate: &[Pose2], config: &EngineConfig, ops: &Receiver<(u64, Op)>) -> Outcome {
     let start = Instant::now();
     let _span = tracing::debug_span!("resolve", keyframes = model.graph.len()).entered();
-    let state = State::rebuild(
-        model,
-        estimate,
-        Some(&config.polish),
-        &config.gps,
-        config.recent_last,
-        config.snapshot,
-        config.linear_stages,
-    );
+    let state = State::rebuild(model, estimate, true, config);
     let mut last_seq = None;
     let state = state.map(|mut s| {
         // ops were validated by the foreground; a numeric failure here only

@@ -6,12 +6,13 @@
 
 use super::gauss_newton::GaussNewton;
 use super::linear_stages::LinearStages;
-use super::{EdgeInput, EngineError};
+use super::{EdgeInput, EngineConfig, EngineError};
 use crate::geometry::Pose2;
 use crate::gps::{variance_factor, Georef, GpsConfig, GpsFix, GpsInput};
 use crate::graph::{chi2_of_edges, edge_chi2, Edge, EdgeKind, KeyframeId, PoseGraph};
 use crate::linear::two_stage;
 use crate::nonlinear::{polish, LevenbergMarquardtParams, PositionPrior, Problem};
+use crate::outliers::{robust_polish, OutlierConfig, OFF_BELOW};
 use crate::sparse::ordering::amd_newest_last;
 use crate::sparse::FactorError;
 use std::collections::HashMap;
@@ -46,6 +47,9 @@ pub struct Model {
     pub graph: PoseGraph,
     /// The weight of each edge (1 unless reweighted).
     pub scale: Vec<f64>,
+    /// The outlier filter's switch `s ∈ [0, 1]` of each edge (1 for
+    /// odometry); its information is multiplied by `scale · s²`.
+    pub switch: Vec<f64>,
     /// Whether each edge's terms are in the solvers.
     pub applied: Vec<bool>,
     /// Whether each keyframe has joined (is linked to the gauge).
@@ -68,6 +72,17 @@ pub struct Model {
 }
 
 impl Model {
+    /// The multiplier of edge `e`'s information: `scale · s²`, or 0 when
+    /// the switch is off ([`OFF_BELOW`]).
+    pub fn weight(&self, e: usize) -> f64 {
+        let s = self.switch[e];
+        if s < OFF_BELOW {
+            0.0
+        } else {
+            self.scale[e] * s * s
+        }
+    }
+
     /// The prior of fix `f` under the current georeference.
     fn prior(&self, f: usize) -> Option<PositionPrior> {
         let g = self.georef.as_ref()?;
@@ -108,14 +123,17 @@ pub struct State {
     chi2: f64,
     stamp: Vec<u32>,
     epoch: u32,
+    outliers: OutlierConfig,
 }
 
 impl State {
     /// An empty state publishing from `source`; `linear` keeps the exact
     /// two-stage solution even when it is not the source.
-    pub fn new(source: SnapshotSource, linear: bool) -> Self {
-        let linear = linear || source == SnapshotSource::Linear;
+    pub fn new(config: &EngineConfig) -> Self {
+        let source = config.snapshot;
+        let linear = config.linear_stages || source == SnapshotSource::Linear;
         Self {
+            outliers: config.outliers,
             model: Model::default(),
             source,
             gn: (source == SnapshotSource::GaussNewton).then(|| GaussNewton::new(Pose2::IDENTITY)),
@@ -158,6 +176,7 @@ impl State {
                     input.kind,
                 )?;
                 self.model.scale.push(1.0);
+                self.model.switch.push(1.0);
                 self.model.applied.push(false);
                 self.edge_chi2.push(0.0);
                 self.model.pending.push(e);
@@ -225,8 +244,9 @@ impl State {
 
     fn reweight(&mut self, e: usize, scale: f64) -> Result<(), EngineError> {
         self.check_weight(e, scale)?;
-        let delta = scale - self.model.scale[e];
+        let before = self.model.weight(e);
         self.model.scale[e] = scale;
+        let delta = self.model.weight(e) - before;
         if self.model.applied[e] {
             if delta != 0.0 {
                 self.contribute(e, delta)?;
@@ -268,7 +288,14 @@ impl State {
             let edge = self.model.graph.edges()[e];
             let (i, j) = (edge.from, edge.to);
             match (self.model.joined[i], self.model.joined[j]) {
-                (true, true) => {}
+                (true, true) => {
+                    // a new loop closure between mapped keyframes enters
+                    // with the switch its error has now
+                    if self.outliers.switchable(&edge) {
+                        let (xi, xj) = (&self.estimate[i], &self.estimate[j]);
+                        self.model.switch[e] = self.outliers.arrival_switch(&edge, xi, xj);
+                    }
+                }
                 (false, false) => {
                     for k in [i, j] {
                         let list = self.model.waiting.entry(k).or_default();
@@ -304,7 +331,7 @@ impl State {
             self.model.applied[e] = true;
             self.model.incident[i].push(e as u32);
             self.model.incident[j].push(e as u32);
-            let s = self.model.scale[e];
+            let s = self.model.weight(e);
             if s != 0.0 {
                 self.contribute(e, s)?;
             }
@@ -342,7 +369,7 @@ impl State {
     /// Recomputes one edge's cached χ² at the current estimate.
     fn refresh_edge(&mut self, e: usize) {
         let edge = &self.model.graph.edges()[e];
-        let v = self.model.scale[e] * edge_chi2(edge, &self.estimate);
+        let v = self.model.weight(e) * edge_chi2(edge, &self.estimate);
         self.chi2 += v - self.edge_chi2[e];
         self.edge_chi2[e] = v;
     }
@@ -400,7 +427,7 @@ impl State {
         let est = &self.estimate;
         for (e, edge) in self.model.graph.edges().iter().enumerate() {
             self.edge_chi2[e] = if self.model.applied[e] {
-                self.model.scale[e] * edge_chi2(edge, est)
+                self.model.weight(e) * edge_chi2(edge, est)
             } else {
                 0.0
             };
@@ -439,23 +466,19 @@ impl State {
         self.linear.as_mut().map(|l| l.solve_exact(graph))
     }
 
-    /// A fresh state from `model`: polished from `start` when `lm` is given,
-    /// re-ordered with the newest `recent` keyframes last, refactorised.
+    /// A fresh state from `model`: polished from `start` when `polish` (the
+    /// outlier filter's switches and the georeference refreshed on the
+    /// way), re-ordered with the newest `recent_last` keyframes last,
+    /// refactorised.
     pub fn rebuild(
         mut model: Model,
         start: &[Pose2],
-        lm: Option<&LevenbergMarquardtParams>,
-        gps: &GpsConfig,
-        recent: usize,
-        source: SnapshotSource,
-        linear: bool,
+        polish: bool,
+        config: &EngineConfig,
     ) -> Result<State, FactorError> {
+        let (recent, source, linear) = (config.recent_last, config.snapshot, config.linear_stages);
         model.unjoin_unconstrained();
         let n = model.graph.len();
-        let active: Vec<(usize, f64)> = (0..model.graph.edges().len())
-            .filter(|&e| model.applied[e] && model.scale[e] > 0.0)
-            .map(|e| (e, model.scale[e]))
-            .collect();
         // compact index over joined keyframes (gauge first)
         let joined: Vec<usize> = (0..n).filter(|&k| model.joined[k]).collect();
         let mut compact = vec![usize::MAX; n];
@@ -464,43 +487,18 @@ impl State {
         }
         let mut lin = start.to_vec();
         lin.resize(n, Pose2::IDENTITY);
-        if let Some(params) = lm {
-            let edges: Vec<Edge> = active
-                .iter()
-                .map(|&(e, s)| {
-                    let mut edge = model.graph.edges()[e];
-                    edge.information = edge.information.scaled(s);
-                    edge.from = compact[edge.from];
-                    edge.to = compact[edge.to];
-                    edge
-                })
-                .collect();
-            let initial: Vec<Pose2> = joined.iter().map(|&k| lin[k]).collect();
-            // Polish from the current estimate and from the two-stage
-            // solution, and keep the better: after a large loop closure the
-            // estimate can sit in the wrong basin (Manhattan's first
-            // re-solve reached χ² 50 from it against an optimum of 24), and
-            // the two-stage solution does not depend on it.
-            let mut best = polish(Problem::edges(&edges), initial.clone(), *params).ok();
-            let keyframes = joined.iter().map(|&k| model.graph.keyframes()[k]).collect();
-            let linear = PoseGraph::from_parts(keyframes, edges.clone())
-                .ok()
-                .and_then(|g| two_stage::solve(&g).ok());
-            if let Some(linear) = linear {
-                let gauge = initial[0];
-                let start: Vec<Pose2> = linear.iter().map(|p| gauge.compose(p)).collect();
-                if let Ok(other) = polish(Problem::edges(&edges), start, *params) {
-                    if best.as_ref().is_none_or(|b| other.final_chi2 < b.final_chi2) {
-                        best = Some(other);
-                    }
-                }
-            }
-            let mut poses = best.map_or(initial, |r| r.poses);
-            model.georeference(gps, &edges, &compact, &mut poses, params);
+        if polish {
+            let mut poses = model.robust_polish(config, &compact, &joined, &lin);
+            let (edges, _) = model.compact_edges(&compact, |m, e| m.weight(e));
+            model.georeference(&config.gps, &edges, &compact, &mut poses, &config.polish);
             for (c, &k) in joined.iter().enumerate() {
                 lin[k] = poses[c];
             }
         }
+        let active: Vec<(usize, f64)> = (0..model.graph.edges().len())
+            .filter(|&e| model.applied[e] && model.weight(e) > 0.0)
+            .map(|e| (e, model.weight(e)))
+            .collect();
         // every fix on a joined keyframe enters the fresh factor
         let mut priors = Vec::new();
         for f in 0..model.fixes.len() {
@@ -555,6 +553,7 @@ impl State {
             edge_chi2: vec![0.0; edges],
             chi2: 0.0,
             epoch: 0,
+            outliers: config.outliers,
         };
         state.recompute_chi2();
         Ok(state)
@@ -567,6 +566,72 @@ impl State {
 }
 
 impl Model {
+    /// The applied edges of nonzero scale over compact keyframe indices,
+    /// their information scaled by `weight(model, e)`, with their indices.
+    fn compact_edges(
+        &self,
+        compact: &[usize],
+        weight: impl Fn(&Model, usize) -> f64,
+    ) -> (Vec<Edge>, Vec<usize>) {
+        let ids: Vec<usize> = (0..self.graph.edges().len())
+            .filter(|&e| self.applied[e] && self.scale[e] > 0.0)
+            .collect();
+        let edges = ids
+            .iter()
+            .map(|&e| {
+                let mut edge = self.graph.edges()[e];
+                edge.information = edge.information.scaled(weight(self, e));
+                edge.from = compact[edge.from];
+                edge.to = compact[edge.to];
+                edge
+            })
+            .collect();
+        (edges, ids)
+    }
+
+    /// The re-solve's polish ([`robust_polish`]) from the current estimate
+    /// and from the two-stage solution under the current switches: after a
+    /// large loop closure the estimate can sit in the wrong basin
+    /// (Manhattan's first re-solve reached χ² 50 from it against an optimum
+    /// of 24), and the two-stage solution does not depend on it. Sets every
+    /// switch from the result; returns the poses (compact indices).
+    fn robust_polish(
+        &mut self,
+        config: &EngineConfig,
+        compact: &[usize],
+        joined: &[usize],
+        lin: &[Pose2],
+    ) -> Vec<Pose2> {
+        let filter = &config.outliers;
+        let (edges, ids) = self.compact_edges(compact, |m, e| m.scale[e]);
+        let switchable: Vec<bool> = ids
+            .iter()
+            .map(|&e| filter.switchable(&self.graph.edges()[e]))
+            .collect();
+        let initial: Vec<Pose2> = joined.iter().map(|&k| lin[k]).collect();
+        let mut starts = vec![initial.clone()];
+        let (weighted, _) = self.compact_edges(compact, |m, e| m.weight(e));
+        let weighted = weighted
+            .into_iter()
+            .filter(|e| e.information.upper() != [0.0; 6])
+            .collect();
+        let keyframes = joined.iter().map(|&k| self.graph.keyframes()[k]).collect();
+        let linear = PoseGraph::from_parts(keyframes, weighted)
+            .ok()
+            .and_then(|g| two_stage::solve(&g).ok());
+        if let Some(linear) = linear {
+            let gauge = initial[0];
+            starts.push(linear.iter().map(|p| gauge.compose(p)).collect());
+        }
+        let Ok(solution) = robust_polish(&edges, &switchable, starts, filter, config.polish) else {
+            return initial;
+        };
+        for (a, &e) in ids.iter().enumerate() {
+            self.switch[e] = solution.switches[a];
+        }
+        solution.poses
+    }
+
     /// With two or more fixes on the joined keyframes: sets the GPS weight
     /// from the polished graph's χ², fits the georeference to `poses`
     /// (compact: `compact[k]` is keyframe `k`'s index), polishes with the
@@ -598,14 +663,7 @@ impl Model {
                 return;
             };
             let priors = input.priors(&g);
-            if let Ok(r) = polish(
-                Problem {
-                    edges,
-                    priors: &priors,
-                },
-                poses.clone(),
-                *params,
-            ) {
+            if let Ok(r) = polish(Problem::new(edges, &priors), poses.clone(), *params) {
                 *poses = r.poses;
             }
         }
@@ -622,7 +680,7 @@ impl Model {
         loop {
             let mut degree = vec![0usize; self.graph.len()];
             for (e, edge) in self.graph.edges().iter().enumerate() {
-                if self.applied[e] && self.scale[e] > 0.0 {
+                if self.applied[e] && self.weight(e) > 0.0 {
                     degree[edge.from] += 1;
                     degree[edge.to] += 1;
                 }

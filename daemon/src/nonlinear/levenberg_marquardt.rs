@@ -117,8 +117,10 @@ impl<'a> LevenbergMarquardt<'a> {
     /// Refills `H` and `g` at the current poses.
     fn linearize(&mut self) {
         let p = &self.problem;
+        let weights = p.weights(&self.poses);
         self.structure.assemble(
             p.edges,
+            weights.as_deref(),
             p.priors,
             &self.poses,
             &mut self.hessian,

@@ -15,4 +15,4 @@ pub mod structure;
 
 pub use levenberg_marquardt::{polish, Iteration, LevenbergMarquardt, LmReport};
 pub use params::LevenbergMarquardtParams;
-pub use prior::{PositionPrior, Problem};
+pub use prior::{PositionPrior, Problem, Robust};

@@ -1,8 +1,10 @@
 //! [`PositionPrior`]: an absolute position measurement of one keyframe, and
-//! [`Problem`]: the cost the polish minimises.
+//! [`Problem`]: the cost the polish minimises, with [`Robust`] switches
+//! on loop closures.
 
 use crate::geometry::Pose2;
-use crate::graph::{chi2_of_edges, Edge};
+use crate::graph::{chi2_of_edges, edge_chi2, Edge};
+use crate::outliers::Kernel;
 use faer::c64;
 use nalgebra::Matrix2;
 
@@ -28,24 +30,76 @@ impl PositionPrior {
     }
 }
 
-/// What the polish minimises: g2o's SE(2) cost of the edges plus the
-/// priors' `eᵀΩe`.
+/// Which edges are switchable (loop closures) and how their switch
+/// follows their error.
+#[derive(Clone, Copy, Debug)]
+pub struct Robust<'a> {
+    /// The closed-form switch.
+    pub kernel: Kernel,
+    /// One flag per edge of the problem.
+    pub switchable: &'a [bool],
+}
+
+/// What the polish minimises: g2o's SE(2) cost of the edges (a robust
+/// cost `ρ(χ²)` on switchable ones) plus the priors' `eᵀΩe`.
 #[derive(Clone, Copy, Debug)]
 pub struct Problem<'a> {
     /// Relative-pose edges.
     pub edges: &'a [Edge],
     /// Absolute position priors.
     pub priors: &'a [PositionPrior],
+    /// Switchable edges, if any.
+    pub robust: Option<Robust<'a>>,
 }
 
 impl<'a> Problem<'a> {
     /// Edges only.
     pub fn edges(edges: &'a [Edge]) -> Self {
-        Self { edges, priors: &[] }
+        Self::new(edges, &[])
+    }
+
+    /// Edges and priors, no switches.
+    pub fn new(edges: &'a [Edge], priors: &'a [PositionPrior]) -> Self {
+        Self {
+            edges,
+            priors,
+            robust: None,
+        }
     }
 
     /// The total cost at `poses`.
     pub fn chi2(&self, poses: &[Pose2]) -> f64 {
-        chi2_of_edges(self.edges, poses) + self.priors.iter().map(|p| p.chi2(poses)).sum::<f64>()
+        let priors = self.priors.iter().map(|p| p.chi2(poses)).sum::<f64>();
+        let Some(r) = &self.robust else {
+            return chi2_of_edges(self.edges, poses) + priors;
+        };
+        let edges: f64 = (self.edges.iter().zip(r.switchable))
+            .map(|(e, &sw)| {
+                let (xi, xj) = (&poses[e.from], &poses[e.to]);
+                if sw {
+                    r.kernel.cost(e, xi, xj)
+                } else {
+                    edge_chi2(e, poses)
+                }
+            })
+            .sum();
+        edges + priors
+    }
+
+    /// The IRLS weight `s²` of every edge at `poses` (1 where not
+    /// switchable), or `None` without switches.
+    pub fn weights(&self, poses: &[Pose2]) -> Option<Vec<f64>> {
+        let r = self.robust.as_ref()?;
+        Some(
+            (self.edges.iter().zip(r.switchable))
+                .map(|(e, &sw)| {
+                    if sw {
+                        r.kernel.switch(e, &poses[e.from], &poses[e.to]).powi(2)
+                    } else {
+                        1.0
+                    }
+                })
+                .collect(),
+        )
     }
 }

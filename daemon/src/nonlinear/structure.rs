@@ -99,12 +99,14 @@ impl HessianStructure {
         var_of(&self.block_of, edge, a)
     }
 
-    /// Fills `hessian` (same pattern) and `gradient` with `Σ Jᵀ Ω J` and
-    /// `Σ Jᵀ Ω e` of `edges` (those given to [`Self::new`]) and of `priors`
-    /// (which touch only diagonal blocks, always in the pattern) at `poses`.
+    /// Fills `hessian` (same pattern) and `gradient` with `Σ w Jᵀ Ω J` and
+    /// `Σ w Jᵀ Ω e` of `edges` (those given to [`Self::new`], weighted by
+    /// `weights`, else 1) and of `priors` (which touch only diagonal
+    /// blocks, always in the pattern) at `poses`.
     pub fn assemble(
         &self,
         edges: &[Edge],
+        weights: Option<&[f64]>,
         priors: &[PositionPrior],
         poses: &[Pose2],
         hessian: &mut UpperCsc<f64>,
@@ -132,7 +134,15 @@ impl HessianStructure {
         }
         let values = hessian.values_mut();
         for (k, edge) in edges.iter().enumerate() {
-            let (h, g) = local_system(edge, &poses[edge.from], &poses[edge.to]);
+            let w = weights.map_or(1.0, |w| w[k]);
+            if w == 0.0 {
+                continue;
+            }
+            let (mut h, mut g) = local_system(edge, &poses[edge.from], &poses[edge.to]);
+            if w != 1.0 {
+                h *= w;
+                g *= w;
+            }
             let slots = &self.slots[k];
             for a in 0..6 {
                 if let Some(ga) = self.var(edge, a) {

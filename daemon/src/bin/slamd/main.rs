@@ -5,6 +5,7 @@ mod demo;
 mod eval;
 mod gps;
 mod replay;
+mod robust;
 mod run;
 mod solve;
 mod synth;

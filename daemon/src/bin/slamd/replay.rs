@@ -61,6 +61,11 @@ pub struct ReplayOpts {
     pub recent_last: Option<usize>,
     #[command(flatten)]
     pub gps: crate::gps::GpsOpts,
+    #[command(flatten)]
+    pub robust: crate::robust::RobustOpts,
+    /// Turn the outlier filter off (--embedded).
+    #[arg(long)]
+    pub no_filter: bool,
     /// Write one line per keyframe (`k chi2 latency_us`).
     #[arg(long)]
     pub trace: Option<PathBuf>,
@@ -117,6 +122,9 @@ pub trait Sink {
     /// The georeferenced (east, north) of each keyframe; empty until GPS
     /// has georeferenced the map.
     fn enu(&mut self) -> anyhow::Result<HashMap<KeyframeId, c64>>;
+    /// The outlier filter's switch of each edge in the order sent, when
+    /// the sink can tell.
+    fn switches(&mut self) -> Option<Vec<f64>>;
     /// "embedded" or "daemon".
     fn mode(&self) -> &'static str;
 }
@@ -158,6 +166,10 @@ impl Sink for EmbeddedSink {
     fn enu(&mut self) -> anyhow::Result<HashMap<KeyframeId, c64>> {
         let snap = self.0.snapshot();
         Ok(snap.enu_poses().map(|(id, p)| (id, p.position())).collect())
+    }
+
+    fn switches(&mut self) -> Option<Vec<f64>> {
+        Some(self.0.switches().to_vec())
     }
 
     fn mode(&self) -> &'static str {
@@ -303,6 +315,10 @@ impl Sink for DaemonSink {
             .collect())
     }
 
+    fn switches(&mut self) -> Option<Vec<f64>> {
+        None
+    }
+
     fn mode(&self) -> &'static str {
         "daemon"
     }
@@ -313,6 +329,8 @@ pub struct Step {
     pub id: KeyframeId,
     /// The edges whose newer end it is.
     pub edges: Vec<EdgeInput>,
+    /// Their indices in the graph (file order).
+    pub file_index: Vec<usize>,
     /// The GPS fixes taken at it.
     pub fixes: Vec<FixInput>,
 }
@@ -325,8 +343,10 @@ pub fn stream(graph: &PoseGraph, fixes: &[FixInput]) -> Vec<Step> {
         by_id.entry(f.keyframe).or_default().push(*f);
     }
     let mut groups = vec![Vec::new(); graph.len()];
+    let mut index = vec![Vec::new(); graph.len()];
     for e in graph.time_order() {
         let edge = graph.edges()[e];
+        index[edge.newer()].push(e);
         groups[edge.newer()].push(EdgeInput::new(
             graph.id_of(edge.from),
             graph.id_of(edge.to),
@@ -338,11 +358,13 @@ pub fn stream(graph: &PoseGraph, fixes: &[FixInput]) -> Vec<Step> {
     groups
         .into_iter()
         .enumerate()
-        .map(|(k, edges)| {
+        .zip(index)
+        .map(|((k, edges), file_index)| {
             let id = graph.id_of(k);
             Step {
                 id,
                 edges,
+                file_index,
                 fixes: by_id.remove(&id).unwrap_or_default(),
             }
         })
@@ -359,6 +381,8 @@ pub struct Outcome {
     pub resolves: usize,
     pub poses: Vec<Pose2>,
     pub checked: Vec<(usize, Vec<Pose2>)>,
+    /// The final switch of each edge, in file order (embedded only).
+    pub switches: Option<Vec<f64>>,
 }
 
 /// Streams `graph` into `sink`; `progress` is told of each keyframe.
@@ -371,8 +395,10 @@ pub fn replay(
 ) -> anyhow::Result<Outcome> {
     let mut latencies = Vec::with_capacity(graph.len());
     let mut checked = Vec::new();
+    let steps = stream(graph, fixes);
+    let sent: Vec<usize> = steps.iter().flat_map(|s| s.file_index.iter().copied()).collect();
     let start = Instant::now();
-    for (k, step) in stream(graph, fixes).iter().enumerate() {
+    for (k, step) in steps.iter().enumerate() {
         latencies.extend(sink.keyframe(k, step)?);
         if checkpoints.contains(&k) {
             latencies.extend(sink.drain()?);
@@ -389,6 +415,13 @@ pub fn replay(
     let (by_id, resolves) = sink.finish()?;
     let total_s = start.elapsed().as_secs_f64();
     let enu = sink.enu()?;
+    let switches = sink.switches().map(|sw| {
+        let mut by_file = vec![1.0; graph.edges().len()];
+        for (n, &e) in sent.iter().enumerate() {
+            by_file[e] = sw[n];
+        }
+        by_file
+    });
     let poses = graph
         .keyframes()
         .iter()
@@ -403,6 +436,7 @@ pub fn replay(
     latencies.sort_by_key(|&(k, _)| k);
     Ok(Outcome {
         enu,
+        switches,
         trace: latencies.clone(),
         latencies: latencies.into_iter().map(|(_, l)| l).collect(),
         total_s,
@@ -473,6 +507,7 @@ pub fn run(opts: ReplayOpts) -> anyhow::Result<()> {
         .collect::<anyhow::Result<Vec<f64>>>()?
         .into_iter()
         .fold(None, |w: Option<f64>, r| Some(w.map_or(r, |w| w.max(r))));
+    let robust = crate::robust::Rejected::of(&graph, out.switches.as_deref());
     let lat = Latency::of(out.latencies);
     if opts.json {
         let v = serde_json::json!({
@@ -489,6 +524,9 @@ pub fn run(opts: ReplayOpts) -> anyhow::Result<()> {
             "ate": ate,
             "prefixes_checked": out.checked.len(),
             "worst_prefix_ratio": worst_ratio,
+            "loop_closures": robust.loop_closures,
+            "switched_off": robust.rejected.len(),
+            "rejected_edges": out.switches.as_ref().map(|_| &robust.rejected),
             "gps_fixes": fixes.len(),
             "georeferenced": !out.enu.is_empty(),
             "enu_rmse": enu_rmse,
@@ -517,6 +555,13 @@ pub fn run(opts: ReplayOpts) -> anyhow::Result<()> {
         if let Some(e) = enu_rmse {
             println!("enu rmse              {e:.4} m  ({} fixes)", fixes.len());
         }
+        if out.switches.is_some() {
+            println!(
+                "loop closures         {} ({} switched off)",
+                robust.loop_closures,
+                robust.rejected.len()
+            );
+        }
         if let Some(w) = worst_ratio {
             println!(
                 "worst snapshot/prefix-optimum chi2 over {} prefixes: {w:.4}",
@@ -542,5 +587,7 @@ fn engine_config(opts: &ReplayOpts, config: &Config) -> EngineConfig {
         c.gps.origin = Some(o);
     }
     c.gps.absolute = !opts.gps.gps_paper_only;
+    c.outliers = opts.robust.apply(c.outliers);
+    c.outliers.enabled &= !opts.no_filter;
     c
 }

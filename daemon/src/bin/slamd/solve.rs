@@ -5,6 +5,7 @@ use clap::Args;
 use slamd::eval::ate;
 use slamd::graph::PoseGraph;
 use slamd::io::{self, svg};
+use slamd::outliers::OutlierConfig;
 use slamd::solver::{solve_batch, BatchOptions, Formulation};
 use std::path::PathBuf;
 
@@ -32,6 +33,11 @@ pub struct SolveOpts {
     pub odometry_only: bool,
     #[command(flatten)]
     pub gps: crate::gps::GpsOpts,
+    /// Filter wrong loop closures: the robust polish (implies --polish).
+    #[arg(long)]
+    pub robust: bool,
+    #[command(flatten)]
+    pub filter: crate::robust::RobustOpts,
     /// Print one JSON object instead of a table.
     #[arg(long)]
     pub json: bool,
@@ -52,6 +58,7 @@ pub fn run(opts: SolveOpts) -> anyhow::Result<()> {
         formulation: opts.formulation,
         polish: opts.polish,
         gps: gps.as_ref().map(|g| g.input.clone()),
+        robust: opts.robust.then(|| opts.filter.apply(OutlierConfig::default())),
         ..Default::default()
     };
     let sol = solve_batch(&graph, &options).with_context(|| format!("solving {}", opts.file.display()))?;
@@ -91,12 +98,19 @@ pub fn run(opts: SolveOpts) -> anyhow::Result<()> {
             "{} ({}{})",
             file_name(&opts.file),
             opts.formulation,
-            if opts.polish { " + polish" } else { "" }
+            if opts.robust {
+                " + robust polish"
+            } else if opts.polish {
+                " + polish"
+            } else {
+                ""
+            }
         );
         svg::write_svg(plot, &title, &layers).map_err(anyhow::Error::msg)?;
     }
 
     let iterations = sol.polish.as_ref().map(|r| r.iterations.len());
+    let robust = crate::robust::Rejected::of(&graph, sol.switches.as_deref());
     let enu_rmse = gps
         .as_ref()
         .and_then(|g| crate::gps::enu_rmse(g, sol.georef.as_ref(), &sol.poses));
@@ -119,6 +133,9 @@ pub fn run(opts: SolveOpts) -> anyhow::Result<()> {
             "gps_fixes": gps.as_ref().map(|g| g.input.fixes.len()),
             "georeferenced": sol.georef.is_some(),
             "enu_rmse": enu_rmse,
+            "robust": opts.robust,
+            "loop_closures": robust.loop_closures,
+            "rejected_edges": sol.switches.as_ref().map(|_| &robust.rejected),
         });
         println!("{v}");
     } else {
@@ -143,6 +160,13 @@ pub fn run(opts: SolveOpts) -> anyhow::Result<()> {
             println!("scale rho      {rho:.4}  (median virtual axis {m:.4} before scaling; truth 1)");
         }
         println!("chi2           {:.3}", sol.chi2);
+        if sol.switches.is_some() {
+            println!(
+                "loop closures  {} ({} switched off)",
+                robust.loop_closures,
+                robust.rejected.len()
+            );
+        }
         if let Some(a) = ate {
             println!("ate            {:.4} m  over {} keyframes", a.rmse, a.matched);
         }

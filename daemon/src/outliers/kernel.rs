@@ -1,0 +1,134 @@
+//! [`Kernel`]: the closed-form switch of a loop closure and the robust cost
+//! it implies.
+//!
+//! Switchable constraints minimise `s² χ² + Ξ (1 − s)²` per loop closure;
+//! setting the derivative in `s` to zero gives the switch in closed form,
+//! so only poses are optimised and `s²` is an iteratively reweighted least
+//! squares weight on the edge's `Ω` (ALGORITHM.md §3). Each kernel gives
+//! the switch `s(χ²)` and the cost `ρ(χ²)` whose derivative is `s²`, which
+//! is what the polish compares when it accepts a step.
+
+use crate::geometry::Pose2;
+use crate::graph::{edge_error, Edge};
+
+/// How a loop closure's switch follows its error.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
+pub enum Kernel {
+    /// Switchable constraints with a fixed prior weight Ξ:
+    /// `s = Ξ / (Ξ + χ²)`, `ρ = Ξ χ² / (Ξ + χ²)` (Geman–McClure).
+    /// `Ξ = 1` is the unit-free reading of paper B that works.
+    Sc {
+        /// The prior weight Ξ.
+        xi: f64,
+    },
+    /// Dynamic covariance scaling: `s = min(1, 2Φ / (Φ + χ²))`,
+    /// `ρ = χ²` below Φ and `Φ (3χ² − Φ) / (Φ + χ²)` above.
+    Dcs {
+        /// The threshold Φ.
+        phi: f64,
+    },
+    /// Paper B's adaptive switch as printed: `s = 1 / (χ² χ′ |Λ| + 1)`,
+    /// with `χ′` the squared Euclidean error and `|Λ|` the determinant of
+    /// the loop closure's covariance; that is SC with `Ξ = 1 / (χ′ |Λ|)`.
+    /// Its `χ′ |Λ|` carries units (m⁴·rad²…), so it depends on the dataset's
+    /// scale; kept for measurement.
+    Asc,
+}
+
+impl Default for Kernel {
+    fn default() -> Self {
+        Kernel::Dcs { phi: 1.0 }
+    }
+}
+
+impl Kernel {
+    /// The switch `s ∈ [0, 1]` of `edge` at poses `xi`, `xj`.
+    pub fn switch(&self, edge: &Edge, xi: &Pose2, xj: &Pose2) -> f64 {
+        let e = edge_error(edge, xi, xj);
+        let chi2 = edge.information.mahalanobis(&e);
+        match *self {
+            Kernel::Sc { xi } => sc(chi2, xi),
+            Kernel::Dcs { phi } => dcs(chi2, phi),
+            Kernel::Asc => 1.0 / (chi2 * asc_scale(edge, &e) + 1.0),
+        }
+    }
+
+    /// The robust cost `ρ` of `edge` at poses `xi`, `xj`.
+    pub fn cost(&self, edge: &Edge, xi: &Pose2, xj: &Pose2) -> f64 {
+        let e = edge_error(edge, xi, xj);
+        let chi2 = edge.information.mahalanobis(&e);
+        match *self {
+            Kernel::Sc { xi } => xi * chi2 / (xi + chi2),
+            Kernel::Dcs { phi } if chi2 <= phi => chi2,
+            Kernel::Dcs { phi } => phi * (3.0 * chi2 - phi) / (phi + chi2),
+            Kernel::Asc => {
+                let w = 1.0 / asc_scale(edge, &e).max(f64::MIN_POSITIVE);
+                w * chi2 / (w + chi2)
+            }
+        }
+    }
+}
+
+/// SC's switch `Ξ / (Ξ + χ²)`.
+pub fn sc(chi2: f64, xi: f64) -> f64 {
+    xi / (xi + chi2)
+}
+
+/// DCS's switch `min(1, 2Φ / (Φ + χ²))`.
+pub fn dcs(chi2: f64, phi: f64) -> f64 {
+    (2.0 * phi / (phi + chi2)).min(1.0)
+}
+
+/// `χ′ |Λ|` of paper B: squared Euclidean error times det(covariance).
+fn asc_scale(edge: &Edge, e: &[f64; 3]) -> f64 {
+    let euclid = e[0] * e[0] + e[1] * e[1] + e[2] * e[2];
+    euclid * edge.information.covariance().determinant()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::graph::{EdgeKind, Information};
+
+    fn edge(info: Information) -> Edge {
+        Edge {
+            from: 0,
+            to: 1,
+            measurement: Pose2::new(1.0, 0.0, 0.0),
+            information: info,
+            kind: EdgeKind::LoopClosure,
+        }
+    }
+
+    #[test]
+    fn closed_forms_match_hand_computed_values() {
+        // error (0, 2, 0) under Ω = diag(1, 2, 4): χ² = 2·4 = 8
+        let e = edge(Information::from_upper([1.0, 0.0, 0.0, 2.0, 0.0, 4.0]).unwrap());
+        let (a, b) = (Pose2::IDENTITY, Pose2::new(1.0, 2.0, 0.0));
+        assert!((Kernel::Sc { xi: 1.0 }.switch(&e, &a, &b) - 1.0 / 9.0).abs() < 1e-15);
+        assert!((Kernel::Sc { xi: 1.0 }.cost(&e, &a, &b) - 8.0 / 9.0).abs() < 1e-15);
+        assert!((Kernel::Dcs { phi: 1.0 }.switch(&e, &a, &b) - 2.0 / 9.0).abs() < 1e-15);
+        assert!((Kernel::Dcs { phi: 1.0 }.cost(&e, &a, &b) - 23.0 / 9.0).abs() < 1e-15);
+        // ASC: χ′ = 4, |Λ| = det diag(1, 1/2, 1/4) = 1/8: s = 1/(8·4/8 + 1) = 1/5
+        assert!((Kernel::Asc.switch(&e, &a, &b) - 0.2).abs() < 1e-15);
+        // below Φ, DCS leaves the edge alone
+        let near = Pose2::new(1.0, 0.1, 0.0);
+        assert_eq!(Kernel::Dcs { phi: 1.0 }.switch(&e, &a, &near), 1.0);
+        assert!((Kernel::Dcs { phi: 1.0 }.cost(&e, &a, &near) - 0.02).abs() < 1e-15);
+    }
+
+    #[test]
+    fn the_cost_derivative_is_the_squared_switch() {
+        // dρ/dχ² = s²: check by finite differences on χ²
+        let h = 1e-6;
+        for chi2 in [0.3, 0.99, 1.5, 7.0, 300.0] {
+            let rho_sc = |c: f64| 2.0 * c / (2.0 + c);
+            let d = (rho_sc(chi2 + h) - rho_sc(chi2 - h)) / (2.0 * h);
+            assert!((d - sc(chi2, 2.0).powi(2)).abs() < 1e-6, "sc at {chi2}");
+            let rho_dcs = |c: f64| if c <= 1.0 { c } else { (3.0 * c - 1.0) / (1.0 + c) };
+            let d = (rho_dcs(chi2 + h) - rho_dcs(chi2 - h)) / (2.0 * h);
+            assert!((d - dcs(chi2, 1.0).powi(2)).abs() < 1e-6, "dcs at {chi2}");
+        }
+    }
+}

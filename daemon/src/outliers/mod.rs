@@ -1,0 +1,82 @@
+//! Outlier filtering of loop closures.
+//!
+//! - [`kernel`]: the closed-form switches (paper B's ASC as printed, SC with
+//!   a fixed Ξ, DCS) and their robust costs; the polish minimises those
+//!   costs by reweighting each loop closure with `s²` at every iteration.
+//! - [`cycles`]: paper A's cycle-consistency test with IQR fences.
+//!
+//! The engine applies both in its background re-solve: edges the cycle test
+//! rejects are switched off (and tested again at every re-solve, so later
+//! evidence can restore them), the polish reweights the rest, and the final
+//! switches go into the fresh factor. Between re-solves a new loop closure
+//! enters with the switch its error has under the current estimate.
+//! Odometry is never switched.
+
+pub mod cycles;
+pub mod kernel;
+mod robust;
+
+pub use cycles::{CycleCheck, CycleParams, Verdict};
+pub use kernel::Kernel;
+pub use robust::{robust_polish, RobustSolution};
+
+use crate::graph::{Edge, EdgeKind};
+
+/// The `[engine.outliers]` settings. The defaults won the benchmark in
+/// `benches/outliers.py` (README, "Robustness").
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct OutlierConfig {
+    /// Filter at all.
+    pub enabled: bool,
+    /// The switch of each loop closure.
+    pub kernel: Kernel,
+    /// A new loop closure enters with DCS's switch at this Φ (default: the
+    /// 99.9% quantile of χ² with 3 degrees of freedom). The estimate it is
+    /// measured against has not seen it yet and may carry drift, so the
+    /// arrival gate is wider than the kernel the re-solve applies.
+    pub arrival_phi: f64,
+    /// Run paper A's cycle test before the kernel.
+    pub cycles: bool,
+    /// Its parameters.
+    pub cycle: CycleParams,
+}
+
+impl Default for OutlierConfig {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            kernel: Kernel::default(),
+            arrival_phi: 16.27,
+            cycles: false,
+            cycle: CycleParams::default(),
+        }
+    }
+}
+
+impl OutlierConfig {
+    /// The switch a new loop closure enters with, at poses `xi`, `xj`.
+    pub fn arrival_switch(
+        &self,
+        edge: &Edge,
+        xi: &crate::geometry::Pose2,
+        xj: &crate::geometry::Pose2,
+    ) -> f64 {
+        let e = crate::graph::edge_error(edge, xi, xj);
+        kernel::dcs(edge.information.mahalanobis(&e), self.arrival_phi)
+    }
+
+    /// Whether `edge` gets a switch: every edge but odometry, when enabled.
+    pub fn switchable(&self, edge: &Edge) -> bool {
+        self.enabled && edge.kind != EdgeKind::Odometry
+    }
+}
+
+/// A switch below this counts as a rejection (`rejected_edges`).
+pub const REJECTED_BELOW: f64 = 0.5;
+
+/// A switch below this is off: the edge weighs `s² < 0.0025` of itself,
+/// too little to matter, and keeping it out of the factor saves the fill
+/// a wrong long-range edge would cause. The next re-solve still scores it
+/// and can switch it back on.
+pub const OFF_BELOW: f64 = 0.05;
