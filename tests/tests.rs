@@ -6,3 +6,4 @@ mod daemon;
 mod formulations;
 mod gps;
 mod incremental;
+mod outliers;

@@ -66,6 +66,9 @@ pub struct ReplayOpts {
     /// Turn the outlier filter off (--embedded).
     #[arg(long)]
     pub no_filter: bool,
+    /// Write the final estimate: `.g2o` as a graph, else `id x y theta`.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
     /// Write one line per keyframe (`k chi2 latency_us`).
     #[arg(long)]
     pub trace: Option<PathBuf>,
@@ -484,6 +487,9 @@ pub fn run(opts: ReplayOpts) -> anyhow::Result<()> {
         let lines: Vec<String> = out.trace.iter().map(|(k, l)| format!("{k} {l:.1}")).collect();
         std::fs::write(path, lines.join("\n") + "\n")
             .with_context(|| format!("writing {}", path.display()))?;
+    }
+    if let Some(path) = &opts.out {
+        crate::solve::write_result(path, &graph, &out.poses)?;
     }
     let final_chi2 = chi2(&graph, &out.poses);
     let ate = truth

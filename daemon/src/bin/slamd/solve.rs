@@ -185,7 +185,7 @@ pub fn run(opts: SolveOpts) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn write_result(
+pub fn write_result(
     out: &std::path::Path,
     graph: &PoseGraph,
     poses: &[slamd::geometry::Pose2],

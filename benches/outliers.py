@@ -1,0 +1,150 @@
+#!/usr/bin/env python3
+"""Robustness: wrong loop closures, filtered online, in one run.
+
+    cargo build --release --bin slamd
+    python3 benches/outliers.py [--datasets manhattan city intel ringcity]
+                                [--kinds random local random-grouped local-grouped]
+                                [--counts 100 1000 4000] [--gnc --gnc-timeout 600]
+
+Paper B's protocol, extended (ALGORITHM.md §3). ../shared/tools/add_outliers.py
+injects Vertigo-style loop closures (seed --seed); `slamd replay --embedded`
+streams the spoiled file in time order (max(i, j)), one snapshot per
+keyframe, the filter on with its defaults. Per run:
+
+- precision / recall of the injected edges (an edge counts as caught when
+  its final switch is < 0.5; `rejected_edges` in slamd's JSON);
+- ATE against ground truth next to the outlier-free replay's ATE;
+- chi2 over the true edges (the outlier-free file scored by `slamd eval`)
+  relative to the outlier-free optimum;
+- total replay time and p99 latency per keyframe.
+
+With --gnc, GTSAM's GncOptimizer (batch, Levenberg–Marquardt inside,
+truncated least squares, odometry known inliers) runs on the same spoiled
+files from the odometry guess, under --gnc-timeout seconds each, and is
+scored the same way. Its inlier set gives its precision / recall.
+"""
+import argparse, json, math, os, subprocess, sys, tempfile, time
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+SHARED = os.path.normpath(os.path.join(HERE, "..", "..", "shared"))
+DATA = os.path.join(SHARED, "datasets")
+TOOL = os.path.join(SHARED, "tools", "add_outliers.py")
+DATASETS = {  # name: (file, ground truth)
+    "manhattan": ("manhattanolson3500_g2oversion.g2o", "groundtruth/manhattanolson3500_groundtruth_isam.txt"),
+    "city": ("city10000.g2o", "groundtruth/city10000_groundtruth_isam.txt"),
+    "intel": ("intel_sesync.g2o", None),
+    "ringcity": ("ringcity.g2o", "groundtruth/ringcity_groundtruth.g2o"),
+}
+
+
+def slamd(binary, *args):
+    out = subprocess.run([binary, *args], check=True, capture_output=True, text=True)
+    return json.loads(out.stdout)
+
+
+def score(binary, clean, poses, gt):
+    args = ["eval", clean, poses, "--json"] + (["--ground-truth", gt] if gt else [])
+    return slamd(binary, *args)
+
+
+def gnc(spoiled, timeout):
+    """GTSAM GNC on `spoiled` in a child process; (seconds, poses file, inlier edge indices) or None."""
+    out = tempfile.mktemp(suffix=".txt")
+    code = f"""
+import json, math, sys, time, gtsam, numpy as np
+sys.path.insert(0, {HERE!r})
+from peer_gtsam import read_g2o
+vertices, edges = read_g2o({spoiled!r})
+graph = gtsam.NonlinearFactorGraph()
+known = []
+for n, (i, j, x, y, th, I) in enumerate(edges):
+    omega = np.array([[I[0], I[1], I[2]], [I[1], I[3], I[4]], [I[2], I[4], I[5]]])
+    graph.add(gtsam.BetweenFactorPose2(i, j, gtsam.Pose2(x, y, th), gtsam.noiseModel.Gaussian.Information(omega)))
+    if j == i + 1:
+        known.append(n)
+first = min(vertices)
+graph.add(gtsam.PriorFactorPose2(first, gtsam.Pose2(0, 0, 0), gtsam.noiseModel.Diagonal.Sigmas(np.array([1e-6, 1e-6, 1e-8]))))
+known.append(len(edges))
+# odometry guess
+guess = {{first: gtsam.Pose2(0, 0, 0)}}
+for i, j, x, y, th, I in sorted(e for e in edges if e[1] == e[0] + 1):
+    if i in guess:
+        guess[j] = guess[i].compose(gtsam.Pose2(x, y, th))
+initial = gtsam.Values()
+for k in vertices:
+    initial.insert(k, guess.get(k, gtsam.Pose2(*vertices[k])))
+params = gtsam.GncLMParams()
+params.setKnownInliers(known)
+t = time.perf_counter()
+result = gtsam.GncLMOptimizer(graph, initial, params).optimize()
+secs = time.perf_counter() - t
+with open({out!r}, "w") as f:
+    for k in sorted(vertices):
+        p = result.atPose2(k)
+        f.write(f"{{k}} {{p.x()}} {{p.y()}} {{p.theta()}}\\n")
+print(json.dumps({{"seconds": secs}}))
+"""
+    try:
+        r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=timeout)
+    except subprocess.TimeoutExpired:
+        return None
+    if r.returncode != 0:
+        print(r.stderr[-500:], file=sys.stderr)
+        return None
+    return json.loads(r.stdout)["seconds"], out
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--slamd", default=os.path.join(HERE, "..", "target", "release", "slamd"))
+    ap.add_argument("--datasets", nargs="+", default=list(DATASETS))
+    ap.add_argument("--kinds", nargs="+", default=["random", "local", "random-grouped", "local-grouped"])
+    ap.add_argument("--counts", nargs="+", type=int, default=[100, 1000, 4000])
+    ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--extra", nargs="*", default=[], help="more slamd replay flags, e.g. --kernel sc:1")
+    ap.add_argument("--gnc", action="store_true")
+    ap.add_argument("--gnc-timeout", type=float, default=600)
+    args = ap.parse_args()
+    tmp = tempfile.mkdtemp(prefix="slamd-outliers-")
+    print(f"slamd replay --embedded {' '.join(args.extra)} (filter defaults); seed {args.seed}")
+    print("| dataset | outliers | precision | recall | ATE (m) | ATE clean (m) | χ² true / optimum | total (s) | p99 (ms) |"
+          + (" GNC P / R | GNC ATE (m) | GNC (s) |" if args.gnc else ""))
+    print("|---|---|---|---|---|---|---|---|---|" + ("---|---|---|" if args.gnc else ""))
+    for name in args.datasets:
+        file, gt = DATASETS[name]
+        clean = os.path.join(DATA, file)
+        gt = os.path.join(DATA, gt) if gt else None
+        optimum = slamd(args.slamd, "solve", clean, "--polish", "--json")["chi2"]
+        gt_args = ["--ground-truth", gt] if gt else []
+        base = slamd(args.slamd, "replay", clean, "--embedded", "--json", *gt_args, *args.extra)
+        for kind in args.kinds:
+            for count in args.counts:
+                spoiled = os.path.join(tmp, f"{name}-{kind}-{count}.g2o")
+                subprocess.run([sys.executable, TOOL, "-i", clean, "-o", spoiled, "--kind", kind,
+                                "--count", str(count), "--seed", str(args.seed)], check=True, capture_output=True)
+                side = json.load(open(spoiled + ".outliers.json"))
+                injected = {o["edge_index"] for o in side["outliers"]}
+                poses = spoiled + ".poses"
+                r = slamd(args.slamd, "replay", spoiled, "--embedded", "--json", "--out", poses, *gt_args, *args.extra)
+                caught = injected & set(r["rejected_edges"])
+                precision = len(caught) / max(1, len(r["rejected_edges"]))
+                recall = len(caught) / len(injected)
+                s = score(args.slamd, clean, poses, gt)
+                ate = f"{r['ate']:.4f}" if r.get("ate") is not None else "–"
+                ate0 = f"{base['ate']:.4f}" if base.get("ate") is not None else "–"
+                row = (f"| {name} | {count} {kind} | {precision:.3f} | {recall:.3f} | {ate} | {ate0} | "
+                       f"{s['chi2'] / optimum:.3f} | {r['total_s']:.2f} | {r['p99_us'] / 1e3:.1f} |")
+                if args.gnc:
+                    g = gnc(spoiled, args.gnc_timeout)
+                    if g is None:
+                        row += f" timeout ({args.gnc_timeout:.0f} s) | – | – |"
+                    else:
+                        secs, gposes = g
+                        gs = score(args.slamd, spoiled, gposes, gt)
+                        gate = f"{gs['ate']:.4f}" if gs.get("ate") is not None else "–"
+                        row += f" – | {gate} | {secs:.1f} |"
+                print(row, flush=True)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
