@@ -200,3 +200,78 @@ fn solve_robust_reports_the_injected_edges() {
     std::fs::remove_file(&out).unwrap();
     std::fs::remove_file(&side).unwrap();
 }
+
+#[test]
+fn the_daemon_publishes_each_loop_closures_switch() {
+    use crate::daemon::Daemon;
+    use slamd_client::{Frontend, Snapshots};
+    use std::time::{Duration, Instant};
+    let daemon = Daemon::start("switches", &[]);
+    let mut f = Frontend::connect(&daemon.config()).unwrap();
+    let snaps = Snapshots::open(&daemon.namespace).unwrap();
+    // a corridor walked twice: every second keyframe of the return closes a loop
+    let n = 40;
+    let truth: Vec<Pose2> = (0..n)
+        .map(|k| {
+            if k < n / 2 {
+                Pose2::new(k as f64, 0.0, 0.0)
+            } else {
+                Pose2::new((n - 1 - k) as f64, 1.0, std::f64::consts::PI)
+            }
+        })
+        .collect();
+    // σ = 0.1 m and 0.1 rad: stiff enough that bending to one wrong edge costs
+    let info = Information::identity().scaled(100.0);
+    let mut good = Vec::new();
+    let mut wrong = 0;
+    for k in 0..n {
+        f.add_keyframe(k as u64, 0, None).unwrap();
+        if k > 0 {
+            let m = truth[k - 1].between(&truth[k]);
+            f.add_edge(&EdgeInput::new(
+                k as u64 - 1,
+                k as u64,
+                m,
+                info,
+                EdgeKind::Odometry,
+            ))
+            .unwrap();
+        }
+        if k >= n / 2 && k % 2 == 0 {
+            let twin = n - 1 - k;
+            let m = truth[twin].between(&truth[k]);
+            let e = EdgeInput::new(twin as u64, k as u64, m, info, EdgeKind::LoopClosure);
+            good.push(f.add_edge(&e).unwrap());
+        }
+        if k == 30 {
+            let e = EdgeInput::new(3, 30, Pose2::new(0.2, -0.3, 0.1), info, EdgeKind::LoopClosure);
+            wrong = f.add_edge(&e).unwrap();
+        }
+        f.flush().unwrap();
+    }
+    // the re-solve after the stream pauses publishes the final switches
+    let deadline = Instant::now() + Duration::from_secs(30);
+    loop {
+        assert!(
+            Instant::now() < deadline,
+            "no switches with the wrong loop closure off"
+        );
+        let _ = snaps.wait(Duration::from_millis(200)).unwrap();
+        let Some(s) = snaps.switches().unwrap() else {
+            continue;
+        };
+        let by_seq: HashMap<u64, f64> = (s.switches().iter())
+            .filter(|w| w.frontend == f.id())
+            .map(|w| (w.sequence, w.weight))
+            .collect();
+        if by_seq.len() < good.len() + 1 || by_seq[&wrong] >= REJECTED_BELOW {
+            continue;
+        }
+        assert_eq!(s.header().rejected, 1);
+        for seq in &good {
+            assert!(by_seq[seq] > 0.9, "loop closure {seq}: switch {}", by_seq[seq]);
+        }
+        break;
+    }
+    assert!(daemon.stop().success());
+}

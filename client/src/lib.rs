@@ -43,5 +43,5 @@ pub use slamd::engine::{EdgeInput, EngineConfig, FixInput, Snapshot};
 pub use slamd::geometry::Pose2;
 pub use slamd::gps::{Geodetic, GpsConfig};
 pub use slamd::graph::{EdgeKind, Information, KeyframeId};
-pub use slamd::ipc::{Frontend, Server, SnapshotSample, Snapshots, TransportError};
-pub use slamd_protocol::{Pose, Rejection, RejectionReason, SnapshotHeader};
+pub use slamd::ipc::{Frontend, Server, SnapshotSample, Snapshots, SwitchesSample, TransportError};
+pub use slamd_protocol::{Pose, Rejection, RejectionReason, SnapshotHeader, Switch, SwitchesHeader};

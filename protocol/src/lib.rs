@@ -2,8 +2,9 @@
 //!
 //! Frontends publish [`Keyframe`]s, [`Edge`]s and [`GpsFix`]es, then poke
 //! the daemon with an event; the daemon publishes a [`SnapshotHeader`] plus
-//! a slice of [`Pose`]s after each batch, and a [`Rejection`] for every
-//! message it refuses. All names live under one namespace ([`ServiceNames`]).
+//! a slice of [`Pose`]s after each batch, a [`Rejection`] for every
+//! message it refuses, and the outlier filter's [`Switch`] of every loop
+//! closure when they change. All names live under one namespace ([`ServiceNames`]).
 //!
 //! - [`message`]: the `#[repr(C)]` types, identical in every process.
 //! - [`service`]: service names and QoS numbers, in one place.
@@ -25,6 +26,6 @@ pub mod transport;
 
 pub use message::{
     Edge, EdgeKindWire, FrontendAck, GpsFix, Keyframe, Pose, Rejection, RejectionReason, SnapshotHeader,
-    MAX_FRONTENDS, PROTOCOL_VERSION,
+    Switch, SwitchesHeader, MAX_FRONTENDS, PROTOCOL_VERSION,
 };
 pub use service::ServiceNames;

@@ -140,6 +140,44 @@ pub struct Pose {
     pub heading: f64,
 }
 
+/// The outlier filter's current weight of one loop closure.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
+#[type_name("slamd::Switch")]
+pub struct Switch {
+    /// Keyframe `i` of the edge.
+    pub from: u64,
+    /// Keyframe `j`.
+    pub to: u64,
+    /// The frontend that sent it (0: unknown).
+    pub frontend: u32,
+    /// Zero.
+    pub reserved: u32,
+    /// Its message number.
+    pub sequence: u64,
+    /// The switch `s ∈ [0, 1]`: the edge's information counts `s²` times;
+    /// below 0.5 the filter holds it wrong.
+    pub weight: f64,
+}
+
+/// The header of a switch list; the payload is `count` [`Switch`]es, one
+/// per loop closure, in arrival order.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
+#[type_name("slamd::SwitchesHeader")]
+pub struct SwitchesHeader {
+    /// [`PROTOCOL_VERSION`] of the daemon.
+    pub protocol: u32,
+    /// Zero.
+    pub reserved: u32,
+    /// The snapshot version these weights belong to.
+    pub version: u64,
+    /// Number of switches that follow.
+    pub count: u64,
+    /// How many of them are below 0.5.
+    pub rejected: u64,
+}
+
 /// How far the daemon has got with one frontend's messages.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]

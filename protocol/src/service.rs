@@ -8,7 +8,7 @@ pub const PROTOCOL_KEY: &str = "slamd.protocol";
 pub const DEFAULT_NAMESPACE: &str = "slamd";
 
 /// The services of one namespace: `{ns}/keyframes`, `{ns}/edges`,
-/// `{ns}/gps`, `{ns}/poses`, `{ns}/rejections`, and the events `{ns}/ingest`
+/// `{ns}/gps`, `{ns}/poses`, `{ns}/rejections`, `{ns}/switches`, and the events `{ns}/ingest`
 /// (frontends → daemon) and `{ns}/published` (daemon → subscribers).
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct ServiceNames {
@@ -22,6 +22,8 @@ pub struct ServiceNames {
     pub poses: String,
     /// Rejections, daemon → frontends.
     pub rejections: String,
+    /// Loop-closure switches, daemon → subscribers.
+    pub switches: String,
     /// "New input" event, frontends → daemon.
     pub ingest: String,
     /// "New snapshot" event, daemon → subscribers.
@@ -39,6 +41,7 @@ impl ServiceNames {
             gps: n("gps"),
             poses: n("poses"),
             rejections: n("rejections"),
+            switches: n("switches"),
             ingest: n("ingest"),
             published: n("published"),
         }
@@ -95,7 +98,9 @@ impl Qos {
             * (self.initial_poses * size_of::<Pose>() + size_of::<SnapshotHeader>()) as u64;
         let rejections = (self.max_subscribers as u64 * 16 + self.rejection_history as u64)
             * size_of::<Rejection>() as u64;
-        inputs + snapshot + rejections
+        let switches = (self.max_subscribers as u64 * 3 + 2)
+            * (self.initial_poses * size_of::<Switch>() + size_of::<SwitchesHeader>()) as u64;
+        inputs + snapshot + rejections + switches
     }
 }
 

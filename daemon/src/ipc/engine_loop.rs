@@ -5,13 +5,15 @@ use super::held::{Held, Waiting};
 use crate::config::Config;
 use crate::engine::{EdgeInput, Engine, EngineError, FixInput};
 use crate::geometry::Pose2;
-use crate::graph::{GraphError, KeyframeId};
+use crate::graph::{EdgeKind, GraphError, KeyframeId};
+use crate::outliers::REJECTED_BELOW;
 use crate::wire::{engine_rejection, Origin};
 use crossbeam::channel::{Receiver, RecvTimeoutError};
 use slamd_protocol::message::kind;
 use slamd_protocol::transport::{Outlet, TransportError};
 use slamd_protocol::{
-    FrontendAck, Pose, Rejection, RejectionReason, SnapshotHeader, MAX_FRONTENDS, PROTOCOL_VERSION,
+    FrontendAck, Pose, Rejection, RejectionReason, SnapshotHeader, Switch, SwitchesHeader, MAX_FRONTENDS,
+    PROTOCOL_VERSION,
 };
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
@@ -59,6 +61,10 @@ pub struct EngineLoop {
     dirty: bool,
     last_publish: Option<Instant>,
     last_input: Instant,
+    /// Who sent each engine edge, by index.
+    edge_origin: Vec<Origin>,
+    /// A loop closure arrived since the switches were last published.
+    new_loop_closure: bool,
 }
 
 impl EngineLoop {
@@ -74,6 +80,8 @@ impl EngineLoop {
             dirty: false,
             last_publish: None,
             last_input: Instant::now(),
+            edge_origin: Vec::new(),
+            new_loop_closure: false,
         }
     }
 
@@ -174,6 +182,8 @@ impl EngineLoop {
             Ok(_) => {
                 self.counters.edges += 1;
                 self.dirty = true;
+                self.edge_origin.push(o);
+                self.new_loop_closure |= edge.kind != EdgeKind::Odometry;
             }
             Err(EngineError::Graph(GraphError::UnknownKeyframe(missing))) => {
                 let h = Waiting {
@@ -359,7 +369,47 @@ impl EngineLoop {
             publish_us = (t0.elapsed() - solved).as_micros() as u64,
             "Snapshot published."
         );
+        if report.resolved || self.new_loop_closure {
+            self.publish_switches(report.version);
+        }
         self.dirty = false;
         self.last_publish = Some(Instant::now());
+    }
+
+    /// Publishes the filter's switch of every loop closure.
+    fn publish_switches(&mut self, version: u64) {
+        self.new_loop_closure = false;
+        let edges = self.engine.graph().edges();
+        let switches = self.engine.switches();
+        let loops: Vec<usize> = (0..edges.len())
+            .filter(|&e| edges[e].kind != EdgeKind::Odometry)
+            .collect();
+        let rejected = loops.iter().filter(|&&e| switches[e] < REJECTED_BELOW).count();
+        let header = SwitchesHeader {
+            protocol: PROTOCOL_VERSION,
+            reserved: 0,
+            version,
+            count: 0,
+            rejected: rejected as u64,
+        };
+        let graph = self.engine.graph();
+        let items = loops.iter().map(|&e| {
+            let edge = &edges[e];
+            let o = self.edge_origin.get(e).copied().unwrap_or(Origin {
+                frontend: 0,
+                sequence: 0,
+            });
+            Switch {
+                from: graph.id_of(edge.from),
+                to: graph.id_of(edge.to),
+                frontend: o.frontend,
+                reserved: 0,
+                sequence: o.sequence,
+                weight: switches[e],
+            }
+        });
+        if let Err(e) = self.outlet.publish_switches(header, loops.len(), items) {
+            tracing::error!(error = %e, "Cannot publish the switches.");
+        }
     }
 }

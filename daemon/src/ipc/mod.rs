@@ -18,4 +18,6 @@ mod server;
 pub use engine_loop::Counters;
 pub use frontend::Frontend;
 pub use server::{serve, serve_until, ServeError, Server};
-pub use slamd_protocol::transport::{SnapshotLink as Snapshots, SnapshotSample, TransportError};
+pub use slamd_protocol::transport::{
+    SnapshotLink as Snapshots, SnapshotSample, SwitchesSample, TransportError,
+};

@@ -1,9 +1,9 @@
 //! The daemon's ports: [`Ingress`] (creates the services, receives input,
-//! blocks on the WaitSet) and [`Outlet`] (publishes snapshots and
+//! blocks on the WaitSet) and [`Outlet`] (publishes snapshots, switches and
 //! rejections).
 
 use super::{classify, node, protocol_attributes, service_name, shm, TransportError};
-use crate::message::{Edge, GpsFix, Keyframe, Pose, Rejection, SnapshotHeader};
+use crate::message::{Edge, GpsFix, Keyframe, Pose, Rejection, SnapshotHeader, Switch, SwitchesHeader};
 use crate::service::{Qos, ServiceNames};
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
@@ -63,6 +63,7 @@ struct Services {
     _gps: publish_subscribe::PortFactory<ipc::Service, GpsFix, ()>,
     _poses: publish_subscribe::PortFactory<ipc::Service, [Pose], SnapshotHeader>,
     _rejections: publish_subscribe::PortFactory<ipc::Service, Rejection, ()>,
+    _switches: publish_subscribe::PortFactory<ipc::Service, [Switch], SwitchesHeader>,
     _ingest: event::PortFactory<ipc::Service>,
     _published: event::PortFactory<ipc::Service>,
 }
@@ -128,6 +129,18 @@ impl Ingress {
             .enable_safe_overflow(true)
             .open_or_create_with_attributes(&attrs)
             .map_err(|e| classify("create", namespace, &names.rejections, &e))?;
+        let switches = node
+            .service_builder(&service_name(&names.switches)?)
+            .publish_subscribe::<[Switch]>()
+            .user_header::<SwitchesHeader>()
+            .max_publishers(1)
+            .max_subscribers(qos.max_subscribers)
+            .subscriber_max_buffer_size(1)
+            .subscriber_max_borrowed_samples(2)
+            .history_size(1)
+            .enable_safe_overflow(true)
+            .open_or_create_with_attributes(&attrs)
+            .map_err(|e| classify("create", namespace, &names.switches, &e))?;
         let ingest = node
             .service_builder(&service_name(&names.ingest)?)
             .event()
@@ -171,6 +184,7 @@ impl Ingress {
                 _gps: gps,
                 _poses: poses,
                 _rejections: rejections,
+                _switches: switches,
                 _ingest: ingest,
                 _published: published,
             },
@@ -263,6 +277,7 @@ pub struct Outlet {
     poses: Publisher<ipc::Service, [Pose], SnapshotHeader>,
     published: Notifier<ipc::Service>,
     rejections: Publisher<ipc::Service, Rejection, ()>,
+    switches: Publisher<ipc::Service, [Switch], SwitchesHeader>,
 }
 
 impl Outlet {
@@ -290,6 +305,17 @@ impl Outlet {
             .publisher_builder()
             .create()
             .map_err(|e| classify("open", namespace, &names.rejections, &e))?;
+        let switches = node
+            .service_builder(&service_name(&names.switches)?)
+            .publish_subscribe::<[Switch]>()
+            .user_header::<SwitchesHeader>()
+            .open_with_attributes(&attrs)
+            .map_err(|e| classify("open", namespace, &names.switches, &e))?
+            .publisher_builder()
+            .initial_max_slice_len(qos.initial_poses.max(1))
+            .allocation_strategy(AllocationStrategy::PowerOfTwo)
+            .create()
+            .map_err(|e| classify("open", namespace, &names.switches, &e))?;
         let published = node
             .service_builder(&service_name(&names.published)?)
             .event()
@@ -303,6 +329,7 @@ impl Outlet {
             poses,
             published,
             rejections,
+            switches,
         })
     }
 
@@ -328,6 +355,29 @@ impl Outlet {
             .send()
             .map_err(|e| TransportError::other("send snapshot", e))?;
         let _ = self.published.notify();
+        Ok(())
+    }
+
+    /// Publishes the switch of every loop closure (`count` taken from
+    /// `switches`, written straight into shared memory).
+    pub fn publish_switches(
+        &self,
+        header: SwitchesHeader,
+        count: usize,
+        mut switches: impl Iterator<Item = Switch>,
+    ) -> Result<(), TransportError> {
+        let mut sample = self
+            .switches
+            .loan_slice_uninit(count)
+            .map_err(|e| TransportError::other("loan switch memory", e))?;
+        *sample.user_header_mut() = SwitchesHeader {
+            count: count as u64,
+            ..header
+        };
+        let sample = sample.write_from_fn(|_| switches.next().unwrap_or_default());
+        sample
+            .send()
+            .map_err(|e| TransportError::other("send switches", e))?;
         Ok(())
     }
 

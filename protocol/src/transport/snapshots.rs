@@ -1,7 +1,7 @@
-//! [`SnapshotLink`]: reading the daemon's snapshots and rejections.
+//! [`SnapshotLink`]: reading the daemon's snapshots, switches and rejections.
 
 use super::{classify, node, protocol_attributes, service_name, TransportError};
-use crate::message::{Pose, Rejection, SnapshotHeader};
+use crate::message::{Pose, Rejection, SnapshotHeader, Switch, SwitchesHeader};
 use crate::service::ServiceNames;
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::subscriber::Subscriber;
@@ -25,10 +25,26 @@ impl SnapshotSample {
     }
 }
 
-/// Subscriber to snapshots and rejections of one namespace.
+/// The loop closures' switches in shared memory, borrowed while held.
+pub struct SwitchesSample(Sample<ipc::Service, [Switch], SwitchesHeader>);
+
+impl SwitchesSample {
+    /// The header.
+    pub fn header(&self) -> &SwitchesHeader {
+        self.0.user_header()
+    }
+
+    /// One switch per loop closure, read in place.
+    pub fn switches(&self) -> &[Switch] {
+        self.0.payload()
+    }
+}
+
+/// Subscriber to snapshots, switches and rejections of one namespace.
 pub struct SnapshotLink {
     _node: Node<ipc::Service>,
     poses: Subscriber<ipc::Service, [Pose], SnapshotHeader>,
+    switches: Subscriber<ipc::Service, [Switch], SwitchesHeader>,
     published: Listener<ipc::Service>,
     rejections: Subscriber<ipc::Service, Rejection, ()>,
 }
@@ -56,6 +72,15 @@ impl SnapshotLink {
             .subscriber_builder()
             .create()
             .map_err(|e| classify("open", namespace, &names.rejections, &e))?;
+        let switches = node
+            .service_builder(&service_name(&names.switches)?)
+            .publish_subscribe::<[Switch]>()
+            .user_header::<SwitchesHeader>()
+            .open_with_attributes(&attrs)
+            .map_err(|e| classify("open", namespace, &names.switches, &e))?
+            .subscriber_builder()
+            .create()
+            .map_err(|e| classify("open", namespace, &names.switches, &e))?;
         let published = node
             .service_builder(&service_name(&names.published)?)
             .event()
@@ -67,6 +92,7 @@ impl SnapshotLink {
         Ok(Self {
             _node: node,
             poses,
+            switches,
             published,
             rejections,
         })
@@ -101,6 +127,20 @@ impl SnapshotLink {
                 .timed_wait(|_| {}, left)
                 .map_err(|e| TransportError::other("wait for a snapshot", e))?;
         }
+    }
+
+    /// The newest loop-closure switches delivered since the last call, if
+    /// any (never blocks; the daemon publishes them when they change).
+    pub fn switches(&self) -> Result<Option<SwitchesSample>, TransportError> {
+        let mut newest = None;
+        while let Some(s) = self
+            .switches
+            .receive()
+            .map_err(|e| TransportError::other("receive switches", e))?
+        {
+            newest = Some(SwitchesSample(s));
+        }
+        Ok(newest)
     }
 
     /// Every rejection delivered since the last call.
