@@ -45,6 +45,7 @@
 
 pub mod gauss_newton;
 pub mod linear_stages;
+mod model;
 mod resolve;
 mod snapshot;
 mod state;

@@ -340,20 +340,13 @@ impl Outlet {
         &self,
         header: SnapshotHeader,
         count: usize,
-        mut poses: impl Iterator<Item = Pose>,
+        poses: impl Iterator<Item = Pose>,
     ) -> Result<(), TransportError> {
-        let mut sample = self
-            .poses
-            .loan_slice_uninit(count)
-            .map_err(|e| TransportError::other("loan snapshot memory", e))?;
-        *sample.user_header_mut() = SnapshotHeader {
+        let header = SnapshotHeader {
             poses: count as u64,
             ..header
         };
-        let sample = sample.write_from_fn(|_| poses.next().unwrap_or_default());
-        sample
-            .send()
-            .map_err(|e| TransportError::other("send snapshot", e))?;
+        send_slice(&self.poses, header, count, poses, "snapshot")?;
         let _ = self.published.notify();
         Ok(())
     }
@@ -364,21 +357,13 @@ impl Outlet {
         &self,
         header: SwitchesHeader,
         count: usize,
-        mut switches: impl Iterator<Item = Switch>,
+        switches: impl Iterator<Item = Switch>,
     ) -> Result<(), TransportError> {
-        let mut sample = self
-            .switches
-            .loan_slice_uninit(count)
-            .map_err(|e| TransportError::other("loan switch memory", e))?;
-        *sample.user_header_mut() = SwitchesHeader {
+        let header = SwitchesHeader {
             count: count as u64,
             ..header
         };
-        let sample = sample.write_from_fn(|_| switches.next().unwrap_or_default());
-        sample
-            .send()
-            .map_err(|e| TransportError::other("send switches", e))?;
-        Ok(())
+        send_slice(&self.switches, header, count, switches, "switches")
     }
 
     /// Publishes a rejection.
@@ -388,4 +373,28 @@ impl Outlet {
             .map(|_| ())
             .map_err(|e| TransportError::other("send rejection", e))
     }
+}
+
+/// Loans `count` elements, writes `header` and the items (defaults if the
+/// iterator runs short) straight into shared memory, and sends.
+fn send_slice<T, H>(
+    publisher: &Publisher<ipc::Service, [T], H>,
+    header: H,
+    count: usize,
+    mut items: impl Iterator<Item = T>,
+    what: &str,
+) -> Result<(), TransportError>
+where
+    T: std::fmt::Debug + Default + ZeroCopySend + 'static,
+    H: std::fmt::Debug + Default + ZeroCopySend + 'static,
+{
+    let mut sample = publisher
+        .loan_slice_uninit(count)
+        .map_err(|e| TransportError::other(&format!("loan {what} memory"), e))?;
+    *sample.user_header_mut() = header;
+    let sample = sample.write_from_fn(|_| items.next().unwrap_or_default());
+    sample
+        .send()
+        .map_err(|e| TransportError::other(&format!("send {what}"), e))?;
+    Ok(())
 }

@@ -1,0 +1,218 @@
+//! [`Model`]: the graph and everything the engine knows about it besides
+//! the solvers: weights and switches, which keyframes joined, which edges
+//! wait, GPS fixes and the georeference; and the re-solve's work on it
+//! (robust polish, georeferencing).
+
+use super::EngineConfig;
+use crate::geometry::Pose2;
+use crate::gps::{variance_factor, Georef, GpsConfig, GpsFix, GpsInput};
+use crate::graph::{chi2_of_edges, Edge, PoseGraph};
+use crate::linear::two_stage;
+use crate::nonlinear::{polish, LevenbergMarquardtParams, PositionPrior, Problem};
+use crate::outliers::{robust_polish, OFF_BELOW};
+use std::collections::HashMap;
+
+/// The graph and its bookkeeping, without the solvers.
+#[derive(Clone, Debug, Default)]
+pub struct Model {
+    /// Keyframes in arrival order (index 0 is the gauge) and every edge.
+    pub graph: PoseGraph,
+    /// The weight of each edge (1 unless reweighted).
+    pub scale: Vec<f64>,
+    /// The outlier filter's switch `s ∈ [0, 1]` of each edge (1 for
+    /// odometry); its information is multiplied by `scale · s²`.
+    pub switch: Vec<f64>,
+    /// Whether each edge's terms are in the solvers.
+    pub applied: Vec<bool>,
+    /// Whether each keyframe has joined (is linked to the gauge).
+    pub joined: Vec<bool>,
+    /// Edges waiting for a keyframe to join, by keyframe.
+    pub waiting: HashMap<usize, Vec<usize>>,
+    /// Applied edges by keyframe.
+    pub incident: Vec<Vec<u32>>,
+    /// Edges received but not yet connected to the solvers (that happens at
+    /// the next solve, odometry first).
+    pub pending: Vec<usize>,
+    /// GPS fixes, in arrival order.
+    pub fixes: Vec<GpsFix>,
+    /// Whether each fix's prior is in the solver.
+    pub fix_applied: Vec<bool>,
+    /// The map→ENU motion of the last re-solve (with two or more fixes).
+    pub georef: Option<Georef>,
+    /// The weight of every GPS prior (the graph's variance factor).
+    pub gps_weight: f64,
+}
+
+impl Model {
+    /// The multiplier of edge `e`'s information: `scale · s²`, or 0 when
+    /// the switch is off ([`OFF_BELOW`]).
+    pub fn weight(&self, e: usize) -> f64 {
+        let s = self.switch[e];
+        if s < OFF_BELOW {
+            0.0
+        } else {
+            self.scale[e] * s * s
+        }
+    }
+
+    /// The prior of fix `f` under the current georeference.
+    pub(super) fn prior(&self, f: usize) -> Option<PositionPrior> {
+        let g = self.georef.as_ref()?;
+        Some(self.fixes[f].prior(g, self.gps_weight))
+    }
+}
+
+impl Model {
+    /// The applied edges of nonzero scale over compact keyframe indices,
+    /// their information scaled by `weight(model, e)`, with their indices.
+    pub(super) fn compact_edges(
+        &self,
+        compact: &[usize],
+        weight: impl Fn(&Model, usize) -> f64,
+    ) -> (Vec<Edge>, Vec<usize>) {
+        let ids: Vec<usize> = (0..self.graph.edges().len())
+            .filter(|&e| self.applied[e] && self.scale[e] > 0.0)
+            .collect();
+        let edges = ids
+            .iter()
+            .map(|&e| {
+                let mut edge = self.graph.edges()[e];
+                edge.information = edge.information.scaled(weight(self, e));
+                edge.from = compact[edge.from];
+                edge.to = compact[edge.to];
+                edge
+            })
+            .collect();
+        (edges, ids)
+    }
+
+    /// The re-solve's polish ([`robust_polish`]) from the current estimate
+    /// and from the two-stage solutions with and without the switches: after a
+    /// large loop closure the estimate can sit in the wrong basin
+    /// (Manhattan's first re-solve reached χ² 50 from it against an optimum
+    /// of 24), and the two-stage solution does not depend on it. Sets every
+    /// switch from the result; returns the poses (compact indices).
+    pub(super) fn robust_polish(
+        &mut self,
+        config: &EngineConfig,
+        compact: &[usize],
+        joined: &[usize],
+        lin: &[Pose2],
+    ) -> Vec<Pose2> {
+        let filter = &config.outliers;
+        let (edges, ids) = self.compact_edges(compact, |m, e| m.scale[e]);
+        let switchable: Vec<bool> = ids
+            .iter()
+            .map(|&e| filter.switchable(&self.graph.edges()[e]))
+            .collect();
+        let initial: Vec<Pose2> = joined.iter().map(|&k| lin[k]).collect();
+        let mut starts = vec![initial.clone()];
+        // the two-stage solution under the current switches, and (when some
+        // are below 1) under none: a loop closure switched off on arrival
+        // against a drifted estimate must get a start that does not
+        // already exclude it (W10000 otherwise lost 13,000 true ones)
+        let keyframes: Vec<_> = joined.iter().map(|&k| self.graph.keyframes()[k]).collect();
+        let switched = ids.iter().any(|&e| self.switch[e] < 1.0);
+        let weights: &[fn(&Model, usize) -> f64] = if switched {
+            &[|m, e| m.weight(e), |m, e| m.scale[e]]
+        } else {
+            &[|m, e| m.weight(e)]
+        };
+        for weight in weights {
+            let (weighted, _) = self.compact_edges(compact, weight);
+            let weighted = weighted
+                .into_iter()
+                .filter(|e| e.information.upper() != [0.0; 6])
+                .collect();
+            let linear = PoseGraph::from_parts(keyframes.clone(), weighted)
+                .ok()
+                .and_then(|g| two_stage::solve(&g).ok());
+            if let Some(linear) = linear {
+                let gauge = initial[0];
+                starts.push(linear.iter().map(|p| gauge.compose(p)).collect());
+            }
+        }
+        let Ok(solution) = robust_polish(&edges, &switchable, starts, filter, config.polish) else {
+            return initial;
+        };
+        for (a, &e) in ids.iter().enumerate() {
+            self.switch[e] = solution.switches[a];
+        }
+        solution.poses
+    }
+
+    /// With two or more fixes on the joined keyframes: sets the GPS weight
+    /// from the polished graph's χ², fits the georeference to `poses`
+    /// (compact: `compact[k]` is keyframe `k`'s index), polishes with the
+    /// fixes as priors and refits, twice.
+    pub(super) fn georeference(
+        &mut self,
+        config: &GpsConfig,
+        edges: &[Edge],
+        compact: &[usize],
+        poses: &mut Vec<Pose2>,
+        params: &LevenbergMarquardtParams,
+    ) {
+        let fixes: Vec<GpsFix> = (self.fixes.iter())
+            .filter(|f| self.joined[f.keyframe])
+            .map(|f| GpsFix {
+                keyframe: compact[f.keyframe],
+                ..*f
+            })
+            .collect();
+        if !config.absolute || fixes.len() < 2 {
+            return;
+        }
+        let mut input = GpsInput::with_config(fixes, config);
+        if config.calibrate {
+            input.weight = variance_factor(chi2_of_edges(edges, poses), edges.len(), poses.len());
+        }
+        for _ in 0..2 {
+            let Some(g) = input.fit(poses) else {
+                return;
+            };
+            let priors = input.priors(&g);
+            if let Ok(r) = polish(Problem::new(edges, &priors), poses.clone(), *params) {
+                *poses = r.poses;
+            }
+        }
+        if let Some(g) = input.fit(poses) {
+            self.georef = Some(g);
+            self.gps_weight = input.weight;
+        }
+    }
+
+    /// Keyframes (other than the gauge) left without any weighted edge are
+    /// put back to waiting, with their edges: they are unconstrained and
+    /// would make the normal equations singular.
+    pub(super) fn unjoin_unconstrained(&mut self) {
+        loop {
+            let mut degree = vec![0usize; self.graph.len()];
+            for (e, edge) in self.graph.edges().iter().enumerate() {
+                if self.applied[e] && self.weight(e) > 0.0 {
+                    degree[edge.from] += 1;
+                    degree[edge.to] += 1;
+                }
+            }
+            let lonely: Vec<usize> = (1..self.graph.len())
+                .filter(|&k| self.joined[k] && degree[k] == 0)
+                .collect();
+            if lonely.is_empty() {
+                return;
+            }
+            for k in lonely {
+                self.joined[k] = false;
+                for e in std::mem::take(&mut self.incident[k]) {
+                    let e = e as usize;
+                    self.applied[e] = false;
+                    let edge = self.graph.edges()[e];
+                    let other = if edge.from == k { edge.to } else { edge.from };
+                    self.incident[other].retain(|&x| x as usize != e);
+                    for end in [k, other] {
+                        self.waiting.entry(end).or_default().push(e);
+                    }
+                }
+            }
+        }
+    }
+}
