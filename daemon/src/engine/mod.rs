@@ -61,7 +61,7 @@ use crate::outliers::OutlierConfig;
 use crate::sparse::dynamic::UpdateError;
 use faer::c64;
 use resolve::Job;
-use state::State;
+use state::{Polish, State};
 use std::fmt;
 
 /// An edge as a frontend gives it: keyframe ids, `T_ij`, Ω and its kind.
@@ -166,11 +166,14 @@ pub struct EngineConfig {
     /// A column whose solution moves by at most this much does not pass the
     /// change to its subtree (iSAM2's wildfire; m and rad). 0 is exact.
     pub wildfire_threshold: f64,
-    /// Re-solve at once, inline, when the estimate's true χ² exceeds this
-    /// multiple of the χ² its linear model predicts (plus 1): the
+    /// Relinearise at once, inline, when the estimate's true χ² exceeds
+    /// this multiple of the χ² its linear model predicts (plus 1): the
     /// linearisation point is too far from the estimate, as after a large
-    /// loop closure (0: never).
+    /// loop closure (0: never). A running re-solve goes on meanwhile.
     pub nonlinear_ratio: f64,
+    /// Levenberg–Marquardt iterations of the inline relinearisation that
+    /// the nonlinearity check starts.
+    pub relinearise_iterations: usize,
     /// Keyframes kept last in a fresh ordering.
     pub recent_last: usize,
     /// What the published estimate is between re-solves.
@@ -196,6 +199,7 @@ impl Default for EngineConfig {
             background: true,
             wildfire_threshold: 1e-4,
             nonlinear_ratio: 1.5,
+            relinearise_iterations: 8,
             recent_last: 32,
             snapshot: SnapshotSource::default(),
             linear_stages: false,
@@ -228,7 +232,7 @@ pub struct EngineStats {
     pub resolve_seconds: f64,
     /// Refactorisations forced by a failed downdate.
     pub recoveries: usize,
-    /// Inline re-solves forced by the nonlinearity check.
+    /// Inline relinearisations forced by the nonlinearity check.
     pub nonlinear_resolves: usize,
     /// Entries of the Gauss–Newton factor now.
     pub factor_nnz: usize,
@@ -335,7 +339,7 @@ impl Engine {
                 // the change is in the model; the factor is not: rebuild it
                 tracing::warn!(error = %e, "Downdate failed; refactorising.");
                 self.stats.recoveries += 1;
-                self.rebuild_inline(false);
+                self.rebuild_inline(Polish::None);
             }
             Err(e) => return Err(e),
         }
@@ -350,17 +354,16 @@ impl Engine {
     /// Solves for the new estimate, swaps in a finished re-solve, and
     /// starts one when due. Returns what changed.
     pub fn update(&mut self) -> UpdateReport {
-        let mut resolved = self.poll_job();
+        let resolved = self.poll_job();
         let mut moved = self.solve();
         if self.nonlinear() {
             self.stats.nonlinear_resolves += 1;
             tracing::debug!(
                 chi2 = self.state.chi2(),
                 predicted = self.state.predicted_chi2(),
-                "Linearisation failed; re-solving inline."
+                "Linearisation failed; relinearising inline."
             );
-            moved = self.resolve_inline();
-            resolved = true;
+            moved = self.relinearise_inline();
         }
         self.version += 1;
         if self.resolve_due() {
@@ -452,8 +455,23 @@ impl Engine {
                 self.swap_in(outcome);
             }
         }
-        self.rebuild_inline(true);
+        self.rebuild_inline(Polish::Full);
         self.stats.resolves += 1;
+        self.solve()
+    }
+
+    /// A few Levenberg–Marquardt iterations from the estimate and a fresh
+    /// factor at the result, without waiting for a running re-solve (whose
+    /// outcome still swaps in when done).
+    fn relinearise_inline(&mut self) -> usize {
+        let (model, start) = (self.state.model().clone(), self.state.estimate());
+        match State::rebuild(model, start, Polish::Relinearise, &self.config) {
+            Ok(state) => {
+                self.state = state;
+                self.after_resolve();
+            }
+            Err(e) => tracing::error!(error = %e, "Relinearisation failed; the estimate is stale."),
+        }
         self.solve()
     }
 
@@ -464,7 +482,7 @@ impl Engine {
             Err(e) => {
                 tracing::warn!(error = %e, "Update failed; refactorising.");
                 self.stats.recoveries += 1;
-                self.rebuild_inline(false);
+                self.rebuild_inline(Polish::None);
                 self.state.solve(self.config.wildfire_threshold).unwrap_or(0)
             }
         }
@@ -550,7 +568,7 @@ impl Engine {
         true
     }
 
-    fn rebuild_inline(&mut self, polish: bool) {
+    fn rebuild_inline(&mut self, polish: Polish) {
         let (model, start) = (self.state.model().clone(), self.state.estimate());
         match State::rebuild(model, start, polish, &self.config) {
             Ok(state) => {

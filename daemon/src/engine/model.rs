@@ -92,12 +92,17 @@ impl Model {
     /// (Manhattan's first re-solve reached χ² 50 from it against an optimum
     /// of 24), and the two-stage solution does not depend on it. Sets every
     /// switch from the result; returns the poses (compact indices).
+    ///
+    /// With `relinearise` the estimate is the only start and the polish
+    /// stops after `relinearise_iterations`: what a failed linearisation
+    /// needs, at a fraction of the re-solve's cost.
     pub(super) fn robust_polish(
         &mut self,
         config: &EngineConfig,
         compact: &[usize],
         joined: &[usize],
         lin: &[Pose2],
+        relinearise: bool,
     ) -> Vec<Pose2> {
         let filter = &config.outliers;
         let (edges, ids) = self.compact_edges(compact, |m, e| m.scale[e]);
@@ -113,7 +118,9 @@ impl Model {
         // already exclude it (W10000 otherwise lost 13,000 true ones)
         let keyframes: Vec<_> = joined.iter().map(|&k| self.graph.keyframes()[k]).collect();
         let switched = ids.iter().any(|&e| self.switch[e] < 1.0);
-        let weights: &[fn(&Model, usize) -> f64] = if switched {
+        let weights: &[fn(&Model, usize) -> f64] = if relinearise {
+            &[]
+        } else if switched {
             &[|m, e| m.weight(e), |m, e| m.scale[e]]
         } else {
             &[|m, e| m.weight(e)]
@@ -132,7 +139,15 @@ impl Model {
                 starts.push(linear.iter().map(|p| gauge.compose(p)).collect());
             }
         }
-        let Ok(solution) = robust_polish(&edges, &switchable, starts, filter, config.polish) else {
+        let params = LevenbergMarquardtParams {
+            max_iterations: if relinearise {
+                config.relinearise_iterations
+            } else {
+                config.polish.max_iterations
+            },
+            ..config.polish
+        };
+        let Ok(solution) = robust_polish(&edges, &switchable, starts, filter, params) else {
             return initial;
         };
         for (a, &e) in ids.iter().enumerate() {

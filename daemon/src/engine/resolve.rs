@@ -7,7 +7,7 @@
 //! and returns the state with the sequence number of the last op it
 //! applied; the foreground replays the few that came after and swaps.
 
-use super::state::{Model, Op, State};
+use super::state::{Model, Op, Polish, State};
 use super::EngineConfig;
 use crate::geometry::Pose2;
 use crate::sparse::FactorError;
@@ -84,7 +84,7 @@ impl Job {
 pub fn run(model: Model, estimate: &[Pose2], config: &EngineConfig, ops: &Receiver<(u64, Op)>) -> Outcome {
     let start = Instant::now();
     let _span = tracing::debug_span!("resolve", keyframes = model.graph.len()).entered();
-    let state = State::rebuild(model, estimate, true, config);
+    let state = State::rebuild(model, estimate, Polish::Full, config);
     let mut last_seq = None;
     let state = state.map(|mut s| {
         // ops were validated by the foreground; a numeric failure here only

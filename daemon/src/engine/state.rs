@@ -38,6 +38,20 @@ pub enum Op {
     },
 }
 
+/// How [`State::rebuild`] moves the linearisation point before it
+/// refactorises.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Polish {
+    /// The re-solve's: the robust multi-start polish that sets the outlier
+    /// filter's switches, then the georeference.
+    Full,
+    /// A few iterations of the robust polish from the estimate alone: what
+    /// a failed linearisation needs, at a fraction of the re-solve's cost.
+    Relinearise,
+    /// None: refactorise at the estimate.
+    None,
+}
+
 /// Where the published estimate comes from between re-solves.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "kebab-case")]
@@ -414,14 +428,13 @@ impl State {
         self.linear.as_mut().map(|l| l.solve_exact(graph))
     }
 
-    /// A fresh state from `model`: polished from `start` when `polish` (the
-    /// outlier filter's switches and the georeference refreshed on the
-    /// way), re-ordered with the newest `recent_last` keyframes last,
+    /// A fresh state from `model`: polished from `start` as `polish` says,
+    /// re-ordered with the newest `recent_last` keyframes last,
     /// refactorised.
     pub fn rebuild(
         mut model: Model,
         start: &[Pose2],
-        polish: bool,
+        polish: Polish,
         config: &EngineConfig,
     ) -> Result<State, FactorError> {
         let (recent, source, linear) = (config.recent_last, config.snapshot, config.linear_stages);
@@ -435,13 +448,18 @@ impl State {
         }
         let mut lin = start.to_vec();
         lin.resize(n, Pose2::IDENTITY);
-        if polish {
-            let mut poses = model.robust_polish(config, &compact, &joined, &lin);
-            let (edges, _) = model.compact_edges(&compact, |m, e| m.weight(e));
-            model.georeference(&config.gps, &edges, &compact, &mut poses, &config.polish);
-            for (c, &k) in joined.iter().enumerate() {
-                lin[k] = poses[c];
+        let poses = match polish {
+            Polish::Full => {
+                let mut poses = model.robust_polish(config, &compact, &joined, &lin, false);
+                let (edges, _) = model.compact_edges(&compact, |m, e| m.weight(e));
+                model.georeference(&config.gps, &edges, &compact, &mut poses, &config.polish);
+                Some(poses)
             }
+            Polish::Relinearise => Some(model.robust_polish(config, &compact, &joined, &lin, true)),
+            Polish::None => None,
+        };
+        for (c, &k) in joined.iter().enumerate().filter(|_| poses.is_some()) {
+            lin[k] = poses.as_ref().expect("polished")[c];
         }
         let active: Vec<(usize, f64)> = (0..model.graph.edges().len())
             .filter(|&e| model.applied[e] && model.weight(e) > 0.0)
