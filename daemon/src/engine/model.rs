@@ -9,7 +9,7 @@ use crate::gps::{variance_factor, Georef, GpsConfig, GpsFix, GpsInput};
 use crate::graph::{chi2_of_edges, Edge, PoseGraph};
 use crate::linear::two_stage;
 use crate::nonlinear::{polish, LevenbergMarquardtParams, PositionPrior, Problem};
-use crate::outliers::{robust_polish, OFF_BELOW};
+use crate::outliers::{robust_polish, OFF_BELOW, REJECTED_BELOW};
 use std::collections::HashMap;
 
 /// The graph and its bookkeeping, without the solvers.
@@ -113,11 +113,11 @@ impl Model {
         let initial: Vec<Pose2> = joined.iter().map(|&k| lin[k]).collect();
         let mut starts = vec![initial.clone()];
         // the two-stage solution under the current switches, and (when some
-        // are below 1) under none: a loop closure switched off on arrival
+        // are rejected) under none: a loop closure switched off on arrival
         // against a drifted estimate must get a start that does not
         // already exclude it (W10000 otherwise lost 13,000 true ones)
         let keyframes: Vec<_> = joined.iter().map(|&k| self.graph.keyframes()[k]).collect();
-        let switched = ids.iter().any(|&e| self.switch[e] < 1.0);
+        let switched = ids.iter().any(|&e| self.switch[e] < REJECTED_BELOW);
         let weights: &[fn(&Model, usize) -> f64] = if relinearise {
             &[]
         } else if switched {

@@ -151,6 +151,21 @@ impl<T: Scalar> DynamicLdlt<T> {
         }
         let col = &mut self.cols[j];
         let slots = &self.slots[..live];
+        if slots == [0, 1, 2] {
+            // an edge's three rows, the common case: unrolled
+            let ([p0, p1, p2, _], [g0, g1, g2, _]) = (ps, gammas);
+            for (&r, l) in col.rows.iter().zip(col.vals.iter_mut()) {
+                let w = &mut self.work[r as usize * MAX_RANK..][..3];
+                let w0 = w[0] - p0 * *l;
+                let l1 = *l + g0 * w0;
+                let w1 = w[1] - p1 * l1;
+                let l2 = l1 + g1 * w1;
+                let w2 = w[2] - p2 * l2;
+                *l = l2 + g2 * w2;
+                w.copy_from_slice(&[w0, w1, w2]);
+            }
+            return Ok(());
+        }
         for (&r, l) in col.rows.iter().zip(col.vals.iter_mut()) {
             let w = &mut self.work[r as usize * MAX_RANK..][..MAX_RANK];
             let mut lv = *l;
