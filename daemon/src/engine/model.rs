@@ -9,7 +9,7 @@ use crate::gps::{variance_factor, Georef, GpsConfig, GpsFix, GpsInput};
 use crate::graph::{chi2_of_edges, Edge, PoseGraph};
 use crate::linear::two_stage;
 use crate::nonlinear::{polish, LevenbergMarquardtParams, PositionPrior, Problem};
-use crate::outliers::{robust_polish, OFF_BELOW, REJECTED_BELOW};
+use crate::outliers::{robust_polish, OFF_BELOW};
 use std::collections::HashMap;
 
 /// The graph and its bookkeeping, without the solvers.
@@ -92,17 +92,12 @@ impl Model {
     /// (Manhattan's first re-solve reached χ² 50 from it against an optimum
     /// of 24), and the two-stage solution does not depend on it. Sets every
     /// switch from the result; returns the poses (compact indices).
-    ///
-    /// With `relinearise` the estimate is the only start and the polish
-    /// stops after `relinearise_iterations`: what a failed linearisation
-    /// needs, at a fraction of the re-solve's cost.
     pub(super) fn robust_polish(
         &mut self,
         config: &EngineConfig,
         compact: &[usize],
         joined: &[usize],
         lin: &[Pose2],
-        relinearise: bool,
     ) -> Vec<Pose2> {
         let filter = &config.outliers;
         let (edges, ids) = self.compact_edges(compact, |m, e| m.scale[e]);
@@ -113,47 +108,39 @@ impl Model {
         let initial: Vec<Pose2> = joined.iter().map(|&k| lin[k]).collect();
         let mut starts = vec![initial.clone()];
         // the two-stage solution under the current switches, and (when some
-        // are rejected) under none: a loop closure switched off on arrival
+        // are below 1) under none: a loop closure switched off on arrival
         // against a drifted estimate must get a start that does not
         // already exclude it (W10000 otherwise lost 13,000 true ones)
-        let keyframes: Vec<_> = joined.iter().map(|&k| self.graph.keyframes()[k]).collect();
-        let switched = ids.iter().any(|&e| self.switch[e] < REJECTED_BELOW);
-        let weights: &[fn(&Model, usize) -> f64] = if relinearise {
-            &[]
-        } else if switched {
-            &[|m, e| m.weight(e), |m, e| m.scale[e]]
-        } else {
-            &[|m, e| m.weight(e)]
-        };
-        for weight in weights {
-            let (weighted, _) = self.compact_edges(compact, weight);
-            let weighted = weighted
-                .into_iter()
-                .filter(|e| e.information.upper() != [0.0; 6])
-                .collect();
-            let linear = PoseGraph::from_parts(keyframes.clone(), weighted)
-                .ok()
-                .and_then(|g| two_stage::solve(&g).ok());
-            if let Some(linear) = linear {
-                let gauge = initial[0];
-                starts.push(linear.iter().map(|p| gauge.compose(p)).collect());
-            }
+        starts.extend(self.linear_start(compact, joined, initial[0], Model::weight));
+        if ids.iter().any(|&e| self.switch[e] < 1.0) {
+            starts.extend(self.linear_start(compact, joined, initial[0], |m, e| m.scale[e]));
         }
-        let params = LevenbergMarquardtParams {
-            max_iterations: if relinearise {
-                config.relinearise_iterations
-            } else {
-                config.polish.max_iterations
-            },
-            ..config.polish
-        };
-        let Ok(solution) = robust_polish(&edges, &switchable, starts, filter, params) else {
+        let Ok(solution) = robust_polish(&edges, &switchable, starts, filter, config.polish) else {
             return initial;
         };
         for (a, &e) in ids.iter().enumerate() {
             self.switch[e] = solution.switches[a];
         }
         solution.poses
+    }
+
+    /// The two-stage solution over the joined keyframes with each edge's
+    /// information scaled by `weight`, moved to the gauge's pose.
+    fn linear_start(
+        &self,
+        compact: &[usize],
+        joined: &[usize],
+        gauge: Pose2,
+        weight: fn(&Model, usize) -> f64,
+    ) -> Option<Vec<Pose2>> {
+        let keyframes: Vec<_> = joined.iter().map(|&k| self.graph.keyframes()[k]).collect();
+        let (weighted, _) = self.compact_edges(compact, weight);
+        let weighted = weighted
+            .into_iter()
+            .filter(|e| e.information.upper() != [0.0; 6])
+            .collect();
+        let linear = two_stage::solve(&PoseGraph::from_parts(keyframes, weighted).ok()?).ok()?;
+        Some(linear.iter().map(|p| gauge.compose(p)).collect())
     }
 
     /// With two or more fixes on the joined keyframes: sets the GPS weight

@@ -45,9 +45,6 @@ pub enum Polish {
     /// The re-solve's: the robust multi-start polish that sets the outlier
     /// filter's switches, then the georeference.
     Full,
-    /// A few iterations of the robust polish from the estimate alone: what
-    /// a failed linearisation needs, at a fraction of the re-solve's cost.
-    Relinearise,
     /// None: refactorise at the estimate.
     None,
 }
@@ -450,12 +447,11 @@ impl State {
         lin.resize(n, Pose2::IDENTITY);
         let poses = match polish {
             Polish::Full => {
-                let mut poses = model.robust_polish(config, &compact, &joined, &lin, false);
+                let mut poses = model.robust_polish(config, &compact, &joined, &lin);
                 let (edges, _) = model.compact_edges(&compact, |m, e| m.weight(e));
                 model.georeference(&config.gps, &edges, &compact, &mut poses, &config.polish);
                 Some(poses)
             }
-            Polish::Relinearise => Some(model.robust_polish(config, &compact, &joined, &lin, true)),
             Polish::None => None,
         };
         for (c, &k) in joined.iter().enumerate().filter(|_| poses.is_some()) {

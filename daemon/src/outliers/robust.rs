@@ -79,7 +79,8 @@ pub fn robust_polish(
     let lowest = probed.iter().map(|r| r.final_chi2).fold(f64::INFINITY, f64::min);
     let mut best: Option<LmReport> = None;
     for r in probed {
-        let r = if r.converged || r.final_chi2 > PRUNE_RATIO * lowest {
+        let spent = r.iterations.len() >= params.max_iterations;
+        let r = if r.converged || spent || r.final_chi2 > PRUNE_RATIO * lowest {
             r
         } else {
             let rest = LevenbergMarquardtParams {
