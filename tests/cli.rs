@@ -79,3 +79,18 @@ fn disconnected_graph_is_an_error_not_a_nan() {
         "{err}"
     );
 }
+
+#[test]
+fn a_kernel_parameter_out_of_range_is_refused_by_name() {
+    let ring = dataset("ring.g2o");
+    let ring = ring.to_str().expect("utf-8");
+    for (arg, says) in [
+        ("dcs:0", "`dcs:0`: the kernel's parameter 0 must be a number > 0"),
+        ("sc:-1", "`sc:-1`: the kernel's parameter -1 must be a number > 0"),
+        ("huber", "unknown kernel `huber`"),
+    ] {
+        let (code, _, err) = run_slamd(&["solve", ring, "--robust", "--kernel", arg]);
+        assert_eq!(code, 2, "{arg}: {err}");
+        assert!(err.contains(says), "{arg}: {err}");
+    }
+}

@@ -217,6 +217,19 @@ impl Config {
         if self.held_timeout_s.is_nan() || self.held_timeout_s <= 0.0 {
             return bad(format!("held_timeout_s {} must be > 0", self.held_timeout_s));
         }
+        let e = &self.engine;
+        for (name, v) in [
+            ("engine.resolve_fill_ratio", e.resolve_fill_ratio),
+            ("engine.wildfire_threshold", e.wildfire_threshold),
+            ("engine.nonlinear_ratio", e.nonlinear_ratio),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return bad(format!("{name} {v} must be a number ≥ 0"));
+            }
+        }
+        if let Err(m) = e.outliers.check() {
+            return bad(format!("engine.outliers: {m}"));
+        }
         Ok(())
     }
 
@@ -274,6 +287,28 @@ mod tests {
             c.validate().unwrap_err().to_string(),
             "configuration: ipc.edge_buffer must be at least 1"
         );
+        let mut c = Config::default();
+        c.engine.outliers.kernel = crate::outliers::Kernel::Dcs { phi: 0.0 };
+        assert_eq!(
+            c.validate().unwrap_err().to_string(),
+            "configuration: engine.outliers: the kernel's parameter 0 must be a number > 0"
+        );
+        c.engine.outliers.kernel = crate::outliers::Kernel::Sc { xi: f64::NAN };
+        assert!(c
+            .validate()
+            .unwrap_err()
+            .to_string()
+            .contains("NaN must be a number > 0"));
+        c.engine.outliers = Default::default();
+        c.engine.outliers.cycle.var_high = c.engine.outliers.cycle.var_low / 2.0;
+        assert!(c.validate().unwrap_err().to_string().contains("cycle.var_high"));
+        c.engine.outliers = Default::default();
+        c.engine.wildfire_threshold = -1.0;
+        assert_eq!(
+            c.validate().unwrap_err().to_string(),
+            "configuration: engine.wildfire_threshold -1 must be a number ≥ 0"
+        );
+        assert!(Config::default().validate().is_ok());
         let dir = std::env::temp_dir().join(format!("slamd-config-bad-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let path = dir.join("bad.toml");

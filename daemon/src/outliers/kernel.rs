@@ -50,6 +50,16 @@ impl Default for Kernel {
 }
 
 impl Kernel {
+    /// Checks the parameter: Φ and Ξ must be finite and > 0.
+    pub fn check(&self) -> Result<(), String> {
+        match *self {
+            Kernel::Dcs { phi: v } | Kernel::Sc { xi: v } if !(v.is_finite() && v > 0.0) => {
+                Err(format!("the kernel's parameter {v} must be a number > 0"))
+            }
+            _ => Ok(()),
+        }
+    }
+
     /// The switch `s ∈ [0, 1]` of `edge` at poses `xi`, `xj`.
     pub fn switch(&self, edge: &Edge, xi: &Pose2, xj: &Pose2) -> f64 {
         let e = edge_error(edge, xi, xj);

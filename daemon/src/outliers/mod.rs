@@ -55,6 +55,40 @@ impl Default for OutlierConfig {
 }
 
 impl OutlierConfig {
+    /// Checks the numbers: the kernel's parameter and `arrival_phi` > 0,
+    /// the cycle test's variances, fence factor and counts in range.
+    pub fn check(&self) -> Result<(), String> {
+        self.kernel.check()?;
+        let c = &self.cycle;
+        let positive = [
+            ("arrival_phi", self.arrival_phi),
+            ("cycle.var_low", c.var_low),
+            ("cycle.var_high", c.var_high),
+            ("cycle.k", c.k),
+        ];
+        for (name, v) in positive {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(format!("{name} {v} must be a number > 0"));
+            }
+        }
+        if c.var_high < c.var_low {
+            return Err(format!(
+                "cycle.var_high {} must be ≥ cycle.var_low {}",
+                c.var_high, c.var_low
+            ));
+        }
+        if c.min_alternatives == 0 || c.max_alternatives < c.min_alternatives {
+            return Err(format!(
+                "cycle.min_alternatives {} must be ≥ 1 and ≤ cycle.max_alternatives {}",
+                c.min_alternatives, c.max_alternatives
+            ));
+        }
+        if !(c.min_sigmas.is_finite() && c.min_sigmas >= 0.0) {
+            return Err(format!("cycle.min_sigmas {} must be a number ≥ 0", c.min_sigmas));
+        }
+        Ok(())
+    }
+
     /// The switch a new loop closure enters with, at poses `xi`, `xj`.
     pub fn arrival_switch(
         &self,

@@ -3,11 +3,13 @@
 
 use clap::Args;
 use slamd::graph::{EdgeKind, PoseGraph};
+use slamd::outliers::kernel::DEFAULT_PHI;
 use slamd::outliers::{Kernel, OutlierConfig, REJECTED_BELOW};
 
 #[derive(Args, Debug, Clone)]
 pub struct RobustOpts {
-    /// The loop-closure switch: dcs[:PHI], sc[:XI] or asc (paper B as printed).
+    /// The loop-closure switch: dcs[:PHI] (default Φ 16.27/3), sc[:XI]
+    /// (default Ξ 1) or asc (paper B as printed).
     #[arg(long, value_parser = parse_kernel)]
     pub kernel: Option<Kernel>,
     /// Run paper A's cycle-consistency test before the kernel.
@@ -30,23 +32,22 @@ fn parse_kernel(s: &str) -> Result<Kernel, String> {
     let (name, value) = match s.split_once(':') {
         Some((n, v)) => {
             let v: f64 = v.parse().map_err(|_| format!("`{v}` is not a number"))?;
-            if !(v.is_finite() && v > 0.0) {
-                return Err(format!("`{s}`: the parameter must be > 0"));
-            }
             (n, Some(v))
         }
         None => (s, None),
     };
-    match name {
-        "dcs" => Ok(Kernel::Dcs {
-            phi: value.unwrap_or(1.0),
-        }),
-        "sc" => Ok(Kernel::Sc {
+    let kernel = match name {
+        "dcs" => Kernel::Dcs {
+            phi: value.unwrap_or(DEFAULT_PHI),
+        },
+        "sc" => Kernel::Sc {
             xi: value.unwrap_or(1.0),
-        }),
-        "asc" if value.is_none() => Ok(Kernel::Asc),
-        _ => Err(format!("unknown kernel `{s}` (dcs[:PHI], sc[:XI], asc)")),
-    }
+        },
+        "asc" if value.is_none() => Kernel::Asc,
+        _ => return Err(format!("unknown kernel `{s}` (dcs[:PHI], sc[:XI], asc)")),
+    };
+    kernel.check().map_err(|m| format!("`{s}`: {m}"))?;
+    Ok(kernel)
 }
 
 /// Loop closures and those the filter holds wrong, in file order.
