@@ -12,7 +12,7 @@ use slamd::geometry::Pose2;
 use slamd::graph::{chi2, EdgeKind, GraphError, Information, Keyframe, PoseGraph};
 use slamd::linear::two_stage::{self, PositionWeights};
 use slamd::solver::{solve_batch, BatchOptions};
-use slamd_tests::{max_pose_error, noise_free, read, relative_pose_error};
+use slamd_tests::{by_newer, edge_input, max_pose_error, noise_free, read, relative_pose_error, replay};
 
 /// An engine that never re-solves on its own and keeps the linear stages.
 fn exact_engine() -> Engine {
@@ -58,26 +58,11 @@ fn check(engine: &mut Engine, what: &str) -> Result<(), TestCaseError> {
     Ok(())
 }
 
-fn edge_input(g: &PoseGraph, e: usize) -> EdgeInput {
-    let edge = g.edges()[e];
-    EdgeInput::new(
-        g.id_of(edge.from),
-        g.id_of(edge.to),
-        edge.measurement,
-        edge.information,
-        edge.kind,
-    )
-}
-
 /// Feeds a graph keyframe by keyframe, edge by edge, checking after each.
 fn replay_checking(g: &PoseGraph, reweights: &[(usize, f64)]) -> Result<(), TestCaseError> {
     let mut engine = exact_engine();
-    let mut groups = vec![Vec::new(); g.len()];
-    for e in g.time_order() {
-        groups[g.edges()[e].newer()].push(e);
-    }
     let mut added = 0;
-    for (k, group) in groups.iter().enumerate() {
+    for (k, group) in by_newer(g).iter().enumerate() {
         engine
             .add_keyframe(g.id_of(k), None)
             .map_err(|e| TestCaseError::fail(e.to_string()))?;
@@ -163,23 +148,6 @@ fn incremental_two_stage_equals_batch_on_dataset_prefixes() {
 
 /// Feeds a graph in time order, one update per keyframe; calls `each` after
 /// every update.
-fn replay(g: &PoseGraph, config: EngineConfig, mut each: impl FnMut(usize, &mut Engine)) -> Engine {
-    let mut engine = Engine::new(config);
-    let mut groups = vec![Vec::new(); g.len()];
-    for e in g.time_order() {
-        groups[g.edges()[e].newer()].push(e);
-    }
-    for (k, group) in groups.iter().enumerate() {
-        engine.add_keyframe(g.id_of(k), None).unwrap();
-        for &e in group {
-            engine.add_edge(edge_input(g, e)).unwrap();
-        }
-        engine.update();
-        each(k, &mut engine);
-    }
-    engine
-}
-
 fn snapshot_poses(engine: &Engine) -> Vec<Pose2> {
     engine.snapshot().poses().map(|(_, p)| p).collect()
 }
@@ -213,7 +181,7 @@ fn snapshots_stay_near_their_prefix_optimum_and_the_end_is_optimal() {
         background: false,
         ..EngineConfig::default()
     };
-    let mut engine = replay(&g, config, |k, engine| {
+    let (mut engine, _) = replay(&g, config, |k, engine| {
         if samples.contains(&k) {
             checked.push((k, snapshot_poses(engine)));
         }
@@ -262,7 +230,7 @@ fn removing_and_restoring_a_loop_closure_round_trips() {
         wildfire_threshold: 0.0,
         ..EngineConfig::default()
     };
-    let mut engine = replay(&g, config, |_, _| {});
+    let (mut engine, _) = replay(&g, config, |_, _| {});
     let before = snapshot_poses(&engine);
     let lc = (0..g.edges().len())
         .find(|&e| engine.graph().edges()[e].kind == EdgeKind::LoopClosure)

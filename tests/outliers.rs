@@ -11,32 +11,9 @@ use slamd_tests::{dataset, run_json};
 use std::collections::{BTreeSet, HashMap};
 use std::process::Command;
 
-/// Feeds `graph` keyframe by keyframe (edges at their newer end), one
-/// update each, then re-solves; returns the engine and, per engine edge,
-/// the graph edge it came from.
+/// [`slamd_tests::replay`], then the re-solve that ends a stream.
 fn replay(graph: &PoseGraph, config: EngineConfig) -> (Engine, Vec<usize>) {
-    let mut engine = Engine::new(config);
-    let mut by_newer: Vec<Vec<usize>> = vec![Vec::new(); graph.len()];
-    for e in graph.time_order() {
-        by_newer[graph.edges()[e].newer()].push(e);
-    }
-    let mut sent = Vec::new();
-    for (k, edges) in by_newer.iter().enumerate() {
-        engine.add_keyframe(graph.id_of(k), None).unwrap();
-        for &e in edges {
-            let edge = graph.edges()[e];
-            let input = EdgeInput::new(
-                graph.id_of(edge.from),
-                graph.id_of(edge.to),
-                edge.measurement,
-                edge.information,
-                edge.kind,
-            );
-            engine.add_edge(input).unwrap();
-            sent.push(e);
-        }
-        engine.update();
-    }
+    let (mut engine, sent) = slamd_tests::replay(graph, config, |_, _| {});
     engine.resolve_now();
     (engine, sent)
 }

@@ -495,9 +495,10 @@ impl Engine {
             && self.nnz_after_resolve > 0
             && self.state.factor_nnz() as f64 > c.resolve_fill_ratio * self.nnz_after_resolve as f64;
         // georeference as soon as two fixes are in, and again whenever
-        // their number has doubled
-        let fixes = self.state.usable_fixes();
-        let by_gps = fixes >= 2 && fixes >= 2 * self.fixes_at_resolve.max(1);
+        // their number has doubled; the count of fixes on joined keyframes
+        // is a scan, so it waits until all fixes together could pass
+        let due = |fixes: usize| fixes >= 2 && fixes >= 2 * self.fixes_at_resolve.max(1);
+        let by_gps = due(self.state.model.fixes.len()) && due(self.state.usable_fixes());
         by_count || by_fill || by_gps
     }
 
