@@ -458,6 +458,11 @@ impl Engine {
                 self.swap_in(outcome);
             }
         }
+        // what the swapped-in state replayed is pending, and a rebuild
+        // polishes only connected edges: connect them first (else the
+        // keyframes that arrived during the last background re-solve, 200
+        // of Manhattan's, missed the polish that ends a stream)
+        self.solve();
         self.rebuild_inline(Polish::Full);
         self.stats.resolves += 1;
         self.solve()
