@@ -66,6 +66,12 @@ impl Job {
         Some(outcome)
     }
 
+    /// Lets the re-solve run out on its own and drops its outcome (the
+    /// thread is detached; the closed channel ends its catching up).
+    pub fn abandon(mut self) {
+        self.handle.take();
+    }
+
     /// Waits for the outcome.
     pub fn finish(mut self) -> Option<Outcome> {
         let outcome = self.done.recv().ok();

@@ -454,8 +454,10 @@ impl State {
             }
             Polish::None => None,
         };
-        for (c, &k) in joined.iter().enumerate().filter(|_| poses.is_some()) {
-            lin[k] = poses.as_ref().expect("polished")[c];
+        if let Some(poses) = poses {
+            for (c, &k) in joined.iter().enumerate() {
+                lin[k] = poses[c];
+            }
         }
         let active: Vec<(usize, f64)> = (0..model.graph.edges().len())
             .filter(|&e| model.applied[e] && model.weight(e) > 0.0)

@@ -12,6 +12,13 @@ use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
 use iceoryx2::service::port_factory::{event, publish_subscribe};
 use iceoryx2::waitset::WaitSetRunResult;
+
+/// Samples a subscriber of the latest-value topics (poses, switches) may
+/// hold at once: one kept by the caller (the last snapshot), the newest
+/// inside `Snapshots::latest`, and the one it is receiving. With 2 a
+/// replay that kept its last snapshot failed with `ExceedsMaxBorrows`
+/// whenever two snapshots arrived between calls.
+const MAX_BORROWED: usize = 3;
 use std::time::Duration;
 
 /// One message from a frontend.
@@ -114,7 +121,7 @@ impl Ingress {
             .max_publishers(1)
             .max_subscribers(qos.max_subscribers)
             .subscriber_max_buffer_size(1)
-            .subscriber_max_borrowed_samples(2)
+            .subscriber_max_borrowed_samples(MAX_BORROWED)
             .history_size(1)
             .enable_safe_overflow(true)
             .open_or_create_with_attributes(&attrs)
@@ -136,7 +143,7 @@ impl Ingress {
             .max_publishers(1)
             .max_subscribers(qos.max_subscribers)
             .subscriber_max_buffer_size(1)
-            .subscriber_max_borrowed_samples(2)
+            .subscriber_max_borrowed_samples(MAX_BORROWED)
             .history_size(1)
             .enable_safe_overflow(true)
             .open_or_create_with_attributes(&attrs)

@@ -119,9 +119,9 @@ pub trait Sink {
     fn drain(&mut self) -> anyhow::Result<Vec<(usize, f64)>>;
     /// The current estimate, by keyframe id.
     fn poses(&mut self) -> anyhow::Result<HashMap<KeyframeId, Pose2>>;
-    /// The final estimate after the re-solve that ends the stream, with the
-    /// number of re-solves.
-    fn finish(&mut self) -> anyhow::Result<(HashMap<KeyframeId, Pose2>, usize)>;
+    /// The final estimate after the re-solve that ends the stream, the
+    /// number of re-solves, and when that estimate was ready.
+    fn finish(&mut self) -> anyhow::Result<(HashMap<KeyframeId, Pose2>, usize, Instant)>;
     /// The georeferenced (east, north) of each keyframe; empty until GPS
     /// has georeferenced the map.
     fn enu(&mut self) -> anyhow::Result<HashMap<KeyframeId, c64>>;
@@ -161,9 +161,9 @@ impl Sink for EmbeddedSink {
         Ok(self.0.snapshot().poses().collect())
     }
 
-    fn finish(&mut self) -> anyhow::Result<(HashMap<KeyframeId, Pose2>, usize)> {
+    fn finish(&mut self) -> anyhow::Result<(HashMap<KeyframeId, Pose2>, usize, Instant)> {
         self.0.resolve_now();
-        Ok((self.poses()?, self.0.stats().resolves))
+        Ok((self.poses()?, self.0.stats().resolves, Instant::now()))
     }
 
     fn enu(&mut self) -> anyhow::Result<HashMap<KeyframeId, c64>> {
@@ -286,25 +286,24 @@ impl Sink for DaemonSink {
             .collect())
     }
 
-    fn finish(&mut self) -> anyhow::Result<(HashMap<KeyframeId, Pose2>, usize)> {
+    fn finish(&mut self) -> anyhow::Result<(HashMap<KeyframeId, Pose2>, usize, Instant)> {
         self.drain()?;
-        // the daemon re-solves once input pauses; wait for that snapshot
-        let before = self.latest.as_ref().map_or(0, |s| s.header().resolves);
-        let deadline = Instant::now() + self.timeout.max(Duration::from_secs(30));
+        // the daemon re-solves once input pauses, and again if edges came
+        // in during that re-solve: take snapshots until it is quiet (the
+        // first re-solved one may predate the last edges' polish)
+        let mut ready = Instant::now();
+        let deadline = ready + self.timeout.max(Duration::from_secs(30));
         while Instant::now() < deadline {
-            match self.snapshots.wait(Duration::from_secs(3))? {
+            match self.snapshots.wait(QUIET)? {
                 Some(s) => {
-                    let resolved = s.header().resolves > before;
                     self.latest = Some(s);
-                    if resolved {
-                        break;
-                    }
+                    ready = Instant::now();
                 }
-                None => break, // quiet: nothing left to re-solve
+                None => break,
             }
         }
         let resolves = self.latest.as_ref().map_or(0, |s| s.header().resolves as usize);
-        Ok((self.poses()?, resolves))
+        Ok((self.poses()?, resolves, ready))
     }
 
     fn enu(&mut self) -> anyhow::Result<HashMap<KeyframeId, c64>> {
@@ -326,6 +325,10 @@ impl Sink for DaemonSink {
         "daemon"
     }
 }
+
+/// No snapshot for this long after the stream ends: the daemon's closing
+/// re-solves are done.
+const QUIET: Duration = Duration::from_secs(3);
 
 /// One keyframe of a replay, with what arrives with it.
 pub struct Step {
@@ -415,8 +418,8 @@ pub fn replay(
         progress(k);
     }
     latencies.extend(sink.drain()?);
-    let (by_id, resolves) = sink.finish()?;
-    let total_s = start.elapsed().as_secs_f64();
+    let (by_id, resolves, ready) = sink.finish()?;
+    let total_s = ready.duration_since(start).as_secs_f64();
     let enu = sink.enu()?;
     let switches = sink.switches().map(|sw| {
         let mut by_file = vec![1.0; graph.edges().len()];
