@@ -277,3 +277,26 @@ fn update_walks_only_the_elimination_path() {
         .unwrap();
     assert_eq!(touched, vec![3, 4]);
 }
+
+#[test]
+fn rank_three_update_and_downdate_match_dense() {
+    // Three vectors over scattered columns, as an edge's rows are; some
+    // columns carry only some of them, so both sweeps of `eliminate` run.
+    let (a, dense) = start::<f64>(12, &[(0, 5, 0.4, 0.0), (2, 9, -0.3, 0.0), (7, 11, 0.2, 0.0)]);
+    let mut f = DynamicLdlt::<f64>::from_matrix(&a, &(0..12).collect::<Vec<_>>()).unwrap();
+    let w0 = [(1, 0.7), (4, -1.1), (8, 0.3), (10, 0.9)];
+    let w1 = [(1, -0.2), (4, 0.5), (10, 1.3)];
+    let w2 = [(4, 0.8), (6, -0.6), (8, 0.4), (10, -0.5), (11, 0.2)];
+    f.rank_k_with(&[&w0, &w1, &w2], 1.0, |_, _| {}).unwrap();
+    let mut want = dense.clone();
+    for w in [&w0[..], &w1[..], &w2[..]] {
+        let mut v = DMatrix::<c64>::zeros(12, 1);
+        for &(i, x) in w {
+            v[i] = c64::new(x, 0.0);
+        }
+        want += &v * v.transpose();
+    }
+    assert!(close(&to_c(&f.to_dense()), &want, 1e-12));
+    f.rank_k_with(&[&w0, &w1, &w2], -1.0, |_, _| {}).unwrap();
+    assert!(close(&to_c(&f.to_dense()), &dense, 1e-12));
+}
