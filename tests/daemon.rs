@@ -445,3 +445,26 @@ fn a_daemon_that_cannot_fit_its_pools_refuses_to_start() {
         "{err}"
     );
 }
+
+#[test]
+fn a_replay_through_the_daemon_ends_at_the_optimum() {
+    // The daemon's closing re-solves (input paused) must cover every edge:
+    // the replay waits until the daemon is quiet and reports that estimate.
+    let daemon = Daemon::start("closing", &[]);
+    let file = slamd_tests::dataset("intel_sesync.g2o");
+    let v = slamd_tests::run_json(&[
+        "replay",
+        file.to_str().unwrap(),
+        "--namespace",
+        &daemon.namespace,
+        "--json",
+    ]);
+    let best = slamd_tests::run_json(&["solve", file.to_str().unwrap(), "--polish", "--json"]);
+    let (got, best) = (v["chi2"].as_f64().unwrap(), best["chi2"].as_f64().unwrap());
+    assert_eq!(v["mode"], "daemon");
+    assert!(
+        (got - best).abs() <= 1e-3 * best,
+        "χ² {got} through the daemon, optimum {best}"
+    );
+    daemon.stop();
+}
