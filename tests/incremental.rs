@@ -146,8 +146,6 @@ fn incremental_two_stage_equals_batch_on_dataset_prefixes() {
     }
 }
 
-/// Feeds a graph in time order, one update per keyframe; calls `each` after
-/// every update.
 fn snapshot_poses(engine: &Engine) -> Vec<Pose2> {
     engine.snapshot().poses().map(|(_, p)| p).collect()
 }

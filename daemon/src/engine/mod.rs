@@ -448,9 +448,10 @@ impl Engine {
 
     /// A full re-solve here. With `wait`, a running background re-solve is
     /// first waited for and swapped in; without, it is abandoned (waiting
-    /// cost a keyframe 15-22 s on City10000 with 1000 outliers). (A cheaper relinearisation for the nonlinearity check, a
-    /// few robust iterations with the switches held, left 8-20 true loop
-    /// closures of the test world off in 3-15% of runs.)
+    /// cost a keyframe 15-22 s on City10000 with 1000 outliers). A cheaper
+    /// relinearisation for the nonlinearity check, a few robust iterations
+    /// with the switches held, left 8-20 true loop closures of the test
+    /// world off in 3-15% of runs.
     fn resolve_inline(&mut self, wait: bool) -> usize {
         match self.job.take() {
             Some(job) if wait => {

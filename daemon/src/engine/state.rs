@@ -445,16 +445,10 @@ impl State {
         }
         let mut lin = start.to_vec();
         lin.resize(n, Pose2::IDENTITY);
-        let poses = match polish {
-            Polish::Full => {
-                let mut poses = model.robust_polish(config, &compact, &joined, &lin);
-                let (edges, _) = model.compact_edges(&compact, |m, e| m.weight(e));
-                model.georeference(&config.gps, &edges, &compact, &mut poses, &config.polish);
-                Some(poses)
-            }
-            Polish::None => None,
-        };
-        if let Some(poses) = poses {
+        if polish == Polish::Full {
+            let mut poses = model.robust_polish(config, &compact, &joined, &lin);
+            let (edges, _) = model.compact_edges(&compact, Model::weight);
+            model.georeference(&config.gps, &edges, &compact, &mut poses, &config.polish);
             for (c, &k) in joined.iter().enumerate() {
                 lin[k] = poses[c];
             }

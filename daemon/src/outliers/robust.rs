@@ -31,8 +31,7 @@ pub const PRUNE_RATIO: f64 = 2.0;
 /// switchable edge reweighted by `s²` at every iteration, from every start
 /// for [`PROBE_ITERATIONS`], then to convergence unless its cost is past
 /// [`PRUNE_RATIO`] times the lowest; the lowest final cost gives the
-/// switches. Fails when no start could
-/// be polished (or none was given).
+/// switches. Fails when no start could be polished (or none was given).
 pub fn robust_polish(
     edges: &[Edge],
     switchable: &[bool],

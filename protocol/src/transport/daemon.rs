@@ -12,6 +12,7 @@ use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
 use iceoryx2::service::port_factory::{event, publish_subscribe};
 use iceoryx2::waitset::WaitSetRunResult;
+use std::time::Duration;
 
 /// Samples a subscriber of the latest-value topics (poses, switches) may
 /// hold at once: one kept by the caller (the last snapshot), the newest
@@ -19,7 +20,6 @@ use iceoryx2::waitset::WaitSetRunResult;
 /// replay that kept its last snapshot failed with `ExceedsMaxBorrows`
 /// whenever two snapshots arrived between calls.
 const MAX_BORROWED: usize = 3;
-use std::time::Duration;
 
 /// One message from a frontend.
 #[derive(Clone, Copy, Debug, PartialEq)]
