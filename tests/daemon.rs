@@ -6,7 +6,7 @@ use slamd_client::{
     RejectionReason, Snapshots,
 };
 use slamd_protocol::{Edge, PROTOCOL_VERSION};
-use slamd_tests::{by_newer, edge_input, read, slamd_bin};
+use slamd_tests::{read, slamd_bin};
 use std::collections::HashMap;
 use std::process::{Child, Command, ExitStatus, Stdio};
 use std::time::{Duration, Instant};
@@ -357,7 +357,7 @@ fn daemon_snapshots_equal_the_embedded_engine() {
     ];
     let daemon = Daemon::start("equal", &env);
     let graph = read("intel_sesync.g2o").prefix(400);
-    let groups = by_newer(&graph);
+    let groups = graph.by_newer();
     let mut f = Frontend::connect(&daemon.config()).unwrap();
     let snaps = Snapshots::open(&daemon.namespace).unwrap();
     let config = Config {
@@ -373,7 +373,7 @@ fn daemon_snapshots_equal_the_embedded_engine() {
         for side in [&mut f as &mut dyn Publish, &mut embedded as &mut dyn Publish] {
             side.add_keyframe(graph.id_of(k), 0, None).unwrap();
             for &e in group {
-                side.add_edge(&edge_input(&graph, e)).unwrap();
+                side.add_edge(&EdgeInput::from_graph(&graph, e)).unwrap();
             }
             side.flush().unwrap();
         }

@@ -12,7 +12,7 @@ use slamd::geometry::Pose2;
 use slamd::graph::{chi2, EdgeKind, GraphError, Information, Keyframe, PoseGraph};
 use slamd::linear::two_stage::{self, PositionWeights};
 use slamd::solver::{solve_batch, BatchOptions};
-use slamd_tests::{by_newer, edge_input, max_pose_error, noise_free, read, relative_pose_error, replay};
+use slamd_tests::{max_pose_error, noise_free, read, relative_pose_error, replay};
 
 /// An engine that never re-solves on its own and keeps the linear stages.
 fn exact_engine() -> Engine {
@@ -62,13 +62,13 @@ fn check(engine: &mut Engine, what: &str) -> Result<(), TestCaseError> {
 fn replay_checking(g: &PoseGraph, reweights: &[(usize, f64)]) -> Result<(), TestCaseError> {
     let mut engine = exact_engine();
     let mut added = 0;
-    for (k, group) in by_newer(g).iter().enumerate() {
+    for (k, group) in g.by_newer().iter().enumerate() {
         engine
             .add_keyframe(g.id_of(k), None)
             .map_err(|e| TestCaseError::fail(e.to_string()))?;
         for &e in group {
             engine
-                .add_edge(edge_input(g, e))
+                .add_edge(EdgeInput::from_graph(g, e))
                 .map_err(|e| TestCaseError::fail(e.to_string()))?;
             added += 1;
             if k > 0 {
@@ -327,7 +327,7 @@ fn the_closing_resolve_polishes_what_arrived_after_a_background_resolve() {
     };
     config.outliers.enabled = false;
     let mut engine = Engine::new(config);
-    let groups = by_newer(&g);
+    let groups = g.by_newer();
     for (k, group) in groups.iter().enumerate() {
         if k == 450 {
             // a background re-solve that has drained its queue before the
@@ -339,7 +339,7 @@ fn the_closing_resolve_polishes_what_arrived_after_a_background_resolve() {
         }
         engine.add_keyframe(g.id_of(k), None).unwrap();
         for &e in group {
-            engine.add_edge(edge_input(&g, e)).unwrap();
+            engine.add_edge(EdgeInput::from_graph(&g, e)).unwrap();
         }
         if k < 450 {
             engine.update();

@@ -116,29 +116,8 @@ pub fn run_json(args: &[&str]) -> serde_json::Value {
     serde_json::from_str(out.trim()).unwrap_or_else(|e| panic!("not JSON ({e}): {out}"))
 }
 
-/// Edge `e` of `g` as a frontend sends it (keyframe ids, not indices).
-pub fn edge_input(g: &PoseGraph, e: usize) -> EdgeInput {
-    let edge = g.edges()[e];
-    EdgeInput::new(
-        g.id_of(edge.from),
-        g.id_of(edge.to),
-        edge.measurement,
-        edge.information,
-        edge.kind,
-    )
-}
-
-/// The edges of `g` grouped by their newer keyframe, each group in time
-/// order: what arrives with each keyframe.
-pub fn by_newer(g: &PoseGraph) -> Vec<Vec<usize>> {
-    let mut groups = vec![Vec::new(); g.len()];
-    for e in g.time_order() {
-        groups[g.edges()[e].newer()].push(e);
-    }
-    groups
-}
-
-/// Feeds `g` keyframe by keyframe, each with its edges ([`by_newer`]) and
+/// Feeds `g` keyframe by keyframe, each with its edges
+/// ([`PoseGraph::by_newer`]) and
 /// one update, then calls `each(k, engine)`. Returns the engine and, per
 /// engine edge index, the graph edge it came from.
 pub fn replay(
@@ -148,11 +127,11 @@ pub fn replay(
 ) -> (Engine, Vec<usize>) {
     let mut engine = Engine::new(config);
     let mut sent = Vec::new();
-    for (k, group) in by_newer(g).iter().enumerate() {
+    for (k, group) in g.by_newer().iter().enumerate() {
         engine.add_keyframe(g.id_of(k), None).expect("a new keyframe");
         for &e in group {
             engine
-                .add_edge(edge_input(g, e))
+                .add_edge(EdgeInput::from_graph(g, e))
                 .expect("an edge between known keyframes");
             sent.push(e);
         }

@@ -96,6 +96,19 @@ impl EdgeInput {
             kind,
         }
     }
+
+    /// Edge `e` of `graph` as a frontend sends it (keyframe ids, not
+    /// indices).
+    pub fn from_graph(graph: &crate::graph::PoseGraph, e: usize) -> Self {
+        let edge = graph.edges()[e];
+        Self::new(
+            graph.id_of(edge.from),
+            graph.id_of(edge.to),
+            edge.measurement,
+            edge.information,
+            edge.kind,
+        )
+    }
 }
 
 /// Why the engine refused a change. A refused change is not stored.

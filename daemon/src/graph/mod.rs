@@ -204,6 +204,16 @@ impl PoseGraph {
         order
     }
 
+    /// Edge indices grouped by their newer keyframe, each group in time
+    /// order: what a frontend publishes with each keyframe.
+    pub fn by_newer(&self) -> Vec<Vec<usize>> {
+        let mut groups = vec![Vec::new(); self.len()];
+        for e in self.time_order() {
+            groups[self.edges[e].newer()].push(e);
+        }
+        groups
+    }
+
     /// A copy with the edges permuted into `order`.
     pub fn reordered(&self, order: &[usize]) -> PoseGraph {
         PoseGraph {
@@ -389,6 +399,7 @@ mod tests {
             .unwrap();
         // edges: 0:(0,1) 1:(1,2) 2:(2,3) 3:(3,0) 4:(1,2)
         assert_eq!(g.time_order(), vec![0, 1, 4, 3, 2]);
+        assert_eq!(g.by_newer(), vec![vec![], vec![0], vec![1, 4], vec![3, 2]]);
     }
 
     #[test]

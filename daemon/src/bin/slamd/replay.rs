@@ -348,19 +348,11 @@ pub fn stream(graph: &PoseGraph, fixes: &[FixInput]) -> Vec<Step> {
     for f in fixes {
         by_id.entry(f.keyframe).or_default().push(*f);
     }
-    let mut groups = vec![Vec::new(); graph.len()];
-    let mut index = vec![Vec::new(); graph.len()];
-    for e in graph.time_order() {
-        let edge = graph.edges()[e];
-        index[edge.newer()].push(e);
-        groups[edge.newer()].push(EdgeInput::new(
-            graph.id_of(edge.from),
-            graph.id_of(edge.to),
-            edge.measurement,
-            edge.information,
-            edge.kind,
-        ));
-    }
+    let index = graph.by_newer();
+    let groups: Vec<Vec<EdgeInput>> = index
+        .iter()
+        .map(|g| g.iter().map(|&e| EdgeInput::from_graph(graph, e)).collect())
+        .collect();
     groups
         .into_iter()
         .enumerate()
