@@ -18,7 +18,7 @@ mod robust;
 
 pub use cycles::{CycleCheck, CycleParams, Verdict};
 pub use kernel::Kernel;
-pub use robust::{robust_polish, RobustSolution, PROBE_ITERATIONS, PRUNE_RATIO};
+pub use robust::{robust_polish, RobustSolution, DORMANT_BELOW, PROBE_ITERATIONS, PRUNE_RATIO};
 
 use crate::graph::{Edge, EdgeKind};
 
