@@ -459,8 +459,9 @@ impl Engine {
         }
     }
 
-    /// A full re-solve here. With `wait`, a running background re-solve is
-    /// first waited for and swapped in; without, it is abandoned (waiting
+    /// A full re-solve here. With `wait` (the closing one), a running
+    /// background re-solve is first waited for and swapped in; without (the
+    /// nonlinearity check's, [`Polish::Inline`]), it is abandoned (waiting
     /// cost a keyframe 15-22 s on City10000 with 1000 outliers). A cheaper
     /// relinearisation for the nonlinearity check, a few robust iterations
     /// with the switches held, left 8-20 true loop closures of the test
@@ -487,7 +488,7 @@ impl Engine {
         // keyframes that arrived during the last background re-solve, 200
         // of Manhattan's, missed the polish that ends a stream)
         self.solve();
-        self.rebuild_inline(Polish::Full);
+        self.rebuild_inline(if wait { Polish::Full } else { Polish::Inline });
         self.stats.resolves += 1;
         self.solve()
     }
