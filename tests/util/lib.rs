@@ -117,9 +117,9 @@ pub fn run_json(args: &[&str]) -> serde_json::Value {
 }
 
 /// Feeds `g` keyframe by keyframe, each with its edges
-/// ([`PoseGraph::by_newer`]) and
-/// one update, then calls `each(k, engine)`. Returns the engine and, per
-/// engine edge index, the graph edge it came from.
+/// ([`PoseGraph::by_newer`]) and one update, then calls `each(k, engine)`.
+/// Returns the engine and, per engine edge index, the graph edge it came
+/// from.
 pub fn replay(
     g: &PoseGraph,
     config: EngineConfig,

@@ -50,7 +50,8 @@ fn polish_awake(
         return polish(problem, start, params);
     };
     let initial_chi2 = problem.chi2(&start);
-    let mut awake = awake_edges(problem.edges, &robust, &start, None);
+    let mut awake = vec![false; problem.edges.len()];
+    wake(problem.edges, &robust, &start, &mut awake);
     let mut poses = start;
     let mut iterations = Vec::new();
     for _ in 0..WAKE_ROUNDS {
@@ -82,9 +83,8 @@ fn polish_awake(
         iterations.extend(r.iterations);
         poses = r.poses;
         let converged = r.converged;
-        let before = awake.iter().filter(|&&a| a).count();
-        awake = awake_edges(problem.edges, &robust, &poses, Some(awake));
-        if awake.iter().filter(|&&a| a).count() == before || iterations.len() >= params.max_iterations {
+        let woke = wake(problem.edges, &robust, &poses, &mut awake);
+        if woke == 0 || iterations.len() >= params.max_iterations {
             return Ok(LmReport {
                 final_chi2: problem.chi2(&poses),
                 poses,
@@ -110,16 +110,20 @@ fn polish_awake(
     Ok(r)
 }
 
-/// Which edges are awake at `poses`: not switchable, already awake, or with
-/// a switch of at least [`DORMANT_BELOW`].
-fn awake_edges(edges: &[Edge], robust: &Robust<'_>, poses: &[Pose2], was: Option<Vec<bool>>) -> Vec<bool> {
-    let mut awake = was.unwrap_or_else(|| vec![false; edges.len()]);
+/// Wakes the edges that are not switchable or whose switch at `poses` is
+/// at least [`DORMANT_BELOW`]; returns how many woke.
+fn wake(edges: &[Edge], robust: &Robust<'_>, poses: &[Pose2], awake: &mut [bool]) -> usize {
+    let mut woke = 0;
     for (a, e) in edges.iter().enumerate() {
-        awake[a] = awake[a]
-            || !robust.switchable[a]
-            || robust.kernel.switch(e, &poses[e.from], &poses[e.to]) >= DORMANT_BELOW;
+        if !awake[a]
+            && (!robust.switchable[a]
+                || robust.kernel.switch(e, &poses[e.from], &poses[e.to]) >= DORMANT_BELOW)
+        {
+            awake[a] = true;
+            woke += 1;
+        }
     }
-    awake
+    woke
 }
 
 /// Paper A's cycle test (when configured) switches off what it rejects;
