@@ -361,3 +361,41 @@ fn the_closing_resolve_polishes_what_arrived_after_a_background_resolve() {
         "χ² {got} after the closing re-solve, optimum {best}"
     );
 }
+
+#[test]
+fn waiting_loop_closures_stay_within_their_budget_and_the_end_is_optimal() {
+    let g = read("manhattanolson3500_g2oversion.g2o").prefix(1200);
+    let budget = 0.1;
+    let config = EngineConfig {
+        background: false,
+        defer_budget: budget,
+        ..EngineConfig::default()
+    };
+    let (mut most_waiting, mut checked) = (0, 0);
+    let (mut engine, _) = replay(&g, config, |k, engine| {
+        let (stats, chi2) = (engine.stats(), engine.snapshot().chi2);
+        assert!(
+            stats.deferred_chi2 <= budget * chi2 * (1.0 + 1e-9) + 1e-12,
+            "keyframe {k}: waiting χ² {} over {budget} × {chi2}",
+            stats.deferred_chi2
+        );
+        most_waiting = most_waiting.max(stats.deferred);
+        checked += 1;
+    });
+    assert_eq!(checked, 1200);
+    // the budget is not vacuous: on Manhattan many loop closures wait
+    assert!(most_waiting >= 20, "at most {most_waiting} loop closures waited");
+    engine.resolve_now();
+    assert_eq!(engine.stats().deferred, 0, "a re-solve factorises every edge");
+    let end = chi2(&g, &snapshot_poses(&engine));
+    let best = solve_batch(
+        &g,
+        &BatchOptions {
+            polish: true,
+            ..Default::default()
+        },
+    )
+    .unwrap()
+    .chi2;
+    assert!(end <= 1.001 * best, "after the re-solve: {end} vs {best}");
+}

@@ -252,3 +252,75 @@ fn the_daemon_publishes_each_loop_closures_switch() {
     }
     assert!(daemon.stop().success());
 }
+
+/// A square loop of 200 one-metre steps whose odometry turns 0.005 rad too
+/// far each step, then 60 steps along the first side again, each with an
+/// exact loop closure to the keyframe 200 back. Odometry has unit
+/// information, loop closures 100 times that.
+fn drifted_loop() -> PoseGraph {
+    let corner = std::f64::consts::FRAC_PI_2;
+    let step = |k: usize| Pose2::new(1.0, 0.0, if k.is_multiple_of(50) { corner } else { 0.0 });
+    let mut truth = vec![Pose2::IDENTITY];
+    for k in 1..260 {
+        let last = *truth.last().unwrap();
+        truth.push(last.compose(&step(k)));
+    }
+    let mut g = PoseGraph::default();
+    for id in 0..truth.len() as u64 {
+        g.add_keyframe(id, None).unwrap();
+    }
+    let info = Information::identity();
+    for k in 1..truth.len() {
+        let z = truth[k - 1].between(&truth[k]);
+        let biased = Pose2::new(z.x, z.y, z.theta + 0.005);
+        g.add_edge(k as u64 - 1, k as u64, biased, info, EdgeKind::Odometry)
+            .unwrap();
+    }
+    for j in 200..truth.len() {
+        let z = truth[j - 200].between(&truth[j]);
+        let precise = info.scaled(100.0);
+        g.add_edge(j as u64 - 200, j as u64, z, precise, EdgeKind::LoopClosure)
+            .unwrap();
+    }
+    g
+}
+
+#[test]
+fn a_drifted_loop_is_taken_back_before_any_scheduled_resolve() {
+    let g = drifted_loop();
+    let closures: Vec<usize> = (0..g.edges().len())
+        .filter(|&e| g.edges()[e].kind == EdgeKind::LoopClosure)
+        .collect();
+    // only the drift check may re-solve: no schedule, no nonlinearity check
+    let online = |drift_run: usize| {
+        let mut config = EngineConfig {
+            background: false,
+            resolve_every_edges: 0,
+            resolve_fill_ratio: 0.0,
+            nonlinear_ratio: 0.0,
+            ..EngineConfig::default()
+        };
+        config.outliers.drift_run = drift_run;
+        let (engine, sent) = slamd_tests::replay(&g, config, |_, _| {});
+        let off = sent
+            .iter()
+            .enumerate()
+            .filter(|&(_, e)| closures.contains(e))
+            .filter(|&(n, _)| engine.switches()[n] < REJECTED_BELOW)
+            .count();
+        (off, engine.stats().drift_resolves)
+    };
+    // without the check the whole revisit stands rejected: the arrival gate
+    // cannot tell the first loop closure from a wrong one, and the
+    // dead-reckoned keyframes after it drift just the same
+    let (off, resolves) = online(0);
+    assert_eq!(resolves, 0);
+    assert!(
+        off >= 55,
+        "only {off} of 60 loop closures rejected without the check"
+    );
+    // with it, the 20th agreeing rejection re-solves and takes them back
+    let (off, resolves) = online(20);
+    assert!(resolves >= 1, "no drift re-solve");
+    assert_eq!(off, 0, "{off} true loop closures still rejected");
+}

@@ -32,6 +32,11 @@
 //!
 //! [engine]                     # see slamd::engine::EngineConfig
 //! resolve_every_edges = 1000
+//! refresh_every_edges = 50     # relinearise between re-solves when the worker is free
+//! defer_budget = 0.0           # > 0: agreeing loop closures wait while their χ² ≤ this × the estimate's
+//!
+//! [engine.outliers]            # see slamd::outliers::OutlierConfig
+//! drift_run = 20               # agreeing rejections in a row that mean drift: re-solve
 //! ```
 
 use crate::engine::EngineConfig;
@@ -222,6 +227,7 @@ impl Config {
             ("engine.resolve_fill_ratio", e.resolve_fill_ratio),
             ("engine.wildfire_threshold", e.wildfire_threshold),
             ("engine.nonlinear_ratio", e.nonlinear_ratio),
+            ("engine.defer_budget", e.defer_budget),
         ] {
             if !(v.is_finite() && v >= 0.0) {
                 return bad(format!("{name} {v} must be a number ≥ 0"));

@@ -1,5 +1,7 @@
 //! The background re-solve: polish, fresh ordering, refactorisation, then
-//! catching up with what arrived meanwhile.
+//! catching up with what arrived meanwhile. Without the polish
+//! ([`Polish::None`]) it is a refresh: every edge relinearised at the
+//! estimate and factorised exactly, one Gauss–Newton iteration.
 //!
 //! The foreground hands over a copy of the [`Model`] and the current
 //! estimate, and from then on forwards every [`Op`] it applies. The worker
@@ -23,6 +25,8 @@ pub struct Outcome {
     pub last_seq: Option<u64>,
     /// Wall time of the re-solve.
     pub seconds: f64,
+    /// How it polished ([`Polish::None`]: a refresh).
+    pub polish: Polish,
 }
 
 /// A running re-solve.
@@ -34,7 +38,7 @@ pub struct Job {
 
 impl Job {
     /// Starts a re-solve of `model` from `estimate` on a new thread.
-    pub fn spawn(model: Model, estimate: Vec<Pose2>, config: EngineConfig) -> Job {
+    pub fn spawn(model: Model, estimate: Vec<Pose2>, config: EngineConfig, polish: Polish) -> Job {
         let (ops, ops_rx) = channel::unbounded();
         let (done_tx, done) = channel::bounded(1);
         let handle = std::thread::Builder::new()
@@ -43,7 +47,7 @@ impl Job {
                 // the caller may be pinned to one core; a re-solve belongs on
                 // whichever core is free
                 crate::affinity::unpin_current_thread();
-                let outcome = run(model, &estimate, &config, &ops_rx);
+                let outcome = run(model, &estimate, &config, polish, &ops_rx);
                 let _ = done_tx.send(outcome);
             })
             .expect("spawn the re-solve thread");
@@ -86,18 +90,37 @@ impl Job {
     }
 }
 
+/// Passes over the queued ops a re-solve makes before handing over.
+const CATCH_UP_PASSES: usize = 3;
+
 /// Builds the fresh state and catches up (also used inline, with no ops).
-pub fn run(model: Model, estimate: &[Pose2], config: &EngineConfig, ops: &Receiver<(u64, Op)>) -> Outcome {
+pub fn run(
+    model: Model,
+    estimate: &[Pose2],
+    config: &EngineConfig,
+    polish: Polish,
+    ops: &Receiver<(u64, Op)>,
+) -> Outcome {
     let start = Instant::now();
-    let _span = tracing::debug_span!("resolve", keyframes = model.graph.len()).entered();
-    let state = State::rebuild(model, estimate, Polish::Full, config);
+    let _span = tracing::debug_span!("resolve", keyframes = model.graph.len(), ?polish).entered();
+    let state = State::rebuild(model, estimate, polish, config);
     let mut last_seq = None;
     let state = state.map(|mut s| {
         // ops were validated by the foreground; a numeric failure here only
-        // costs this re-solve its catch-up accuracy
-        while let Ok((seq, op)) = ops.try_recv() {
-            let _ = s.apply(&op);
-            last_seq = Some(seq);
+        // costs this re-solve its catch-up accuracy. Each pass takes what
+        // is queued; the foreground replays what comes after. A replayed
+        // op costs about what it cost the foreground, so chasing the queue
+        // to empty can last forever (a City10000 re-solve caught up for
+        // 2,000 keyframes while the map drifted without one)
+        for _ in 0..CATCH_UP_PASSES {
+            let queued = ops.len();
+            if queued == 0 {
+                break;
+            }
+            for (seq, op) in ops.try_iter().take(queued) {
+                let _ = s.replay(&op, config.wildfire_threshold);
+                last_seq = Some(seq);
+            }
         }
         // a numeric failure here leaves the state stale; the foreground
         // will notice when its own solve fails and rebuild
@@ -110,5 +133,6 @@ pub fn run(model: Model, estimate: &[Pose2], config: &EngineConfig, ops: &Receiv
         state,
         last_seq,
         seconds,
+        polish,
     }
 }

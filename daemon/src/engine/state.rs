@@ -4,72 +4,18 @@
 //! apply the same [`Op`]s to it, so the re-solved state can catch up with
 //! what arrived while it was being built.
 
+use super::deferred::Deferred;
 use super::gauss_newton::GaussNewton;
 use super::linear_stages::LinearStages;
 pub use super::model::Model;
-use super::{EdgeInput, EngineConfig, EngineError};
+pub use super::op::{Op, Polish, SnapshotSource};
+use super::{EngineConfig, EngineError};
 use crate::geometry::Pose2;
-use crate::gps::{Georef, GpsFix};
+use crate::gps::Georef;
 use crate::graph::{edge_chi2, EdgeKind, KeyframeId};
-use crate::outliers::OutlierConfig;
+use crate::outliers::{DriftRun, OutlierConfig, OFF_BELOW};
 use crate::sparse::ordering::amd_newest_last;
 use crate::sparse::FactorError;
-
-/// One change to the graph, as the engine received it.
-#[derive(Clone, Debug)]
-pub enum Op {
-    /// A new keyframe.
-    Keyframe {
-        /// Its id.
-        id: KeyframeId,
-        /// An initial pose in the map frame, if known.
-        guess: Option<Pose2>,
-    },
-    /// A new edge.
-    Edge(EdgeInput),
-    /// A GPS fix on a known keyframe, in the engine's ENU frame.
-    Gps(GpsFix),
-    /// A new weight `scale ∈ [0, ∞)` for an edge (0 removes it).
-    Weight {
-        /// The edge's index.
-        edge: usize,
-        /// Its new scale.
-        scale: f64,
-    },
-}
-
-/// How [`State::rebuild`] moves the linearisation point before it
-/// refactorises.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Polish {
-    /// The re-solve's: the robust multi-start polish that sets the outlier
-    /// filter's switches, then the georeference.
-    Full,
-    /// The nonlinearity check's inline re-solve: [`Polish::Full`] without
-    /// the start that rescues loop closures switched off on arrival (the
-    /// next background re-solve has it). That start is bent by wrong loop
-    /// closures and took 1-3 s of a City10000 + 1000 keyframe.
-    Inline,
-    /// None: refactorise at the estimate.
-    None,
-}
-
-/// Where the published estimate comes from between re-solves.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum SnapshotSource {
-    /// One Gauss–Newton step from the last polish (iSAM's scheme). Measured
-    /// best: every sampled Manhattan snapshot within 1.29× of its prefix's
-    /// optimum.
-    #[default]
-    GaussNewton,
-    /// The exact two-stage solution, carried by each keyframe's correction
-    /// to the last polish: `S_k = O_k ∘ L_k` with `O_k = X*_k ∘ L0_k⁻¹`.
-    /// Measured worse (6.7× on Manhattan, 69× on an early City prefix) and
-    /// no faster: a loop closure's axis correction rewrites the position
-    /// rows of the whole loop.
-    Linear,
-}
 
 /// The model plus the solvers and the cached χ².
 #[derive(Clone, Debug)]
@@ -88,6 +34,12 @@ pub struct State {
     stamp: Vec<u32>,
     epoch: u32,
     outliers: OutlierConfig,
+    /// Loop closures waiting out of the Gauss–Newton factor.
+    deferred: Deferred,
+    /// The run of agreeing loop closures switched off on arrival.
+    drift: DriftRun,
+    /// A run reached `drift_run`: the map drifted; re-solve.
+    drifted: bool,
 }
 
 impl State {
@@ -108,7 +60,23 @@ impl State {
             chi2: 0.0,
             stamp: Vec::new(),
             epoch: 0,
+            deferred: Deferred::new(config.defer_budget),
+            drift: DriftRun::default(),
+            drifted: false,
         }
+    }
+
+    /// Applies one change as a replay does: a new keyframe first solves
+    /// for the edges before it, as the foreground did at each update, so
+    /// that its loop closures meet an estimate the earlier ones corrected.
+    /// Connected all at once (odometry first), they met hundreds of
+    /// dead-reckoned keyframes, entered the factor with large errors, and
+    /// each walked the whole appended chain.
+    pub fn replay(&mut self, op: &Op, threshold: f64) -> Result<(), EngineError> {
+        if matches!(op, Op::Keyframe { .. }) && !self.model.pending.is_empty() {
+            self.solve(threshold)?;
+        }
+        self.apply(op)
     }
 
     /// Applies one change. Nothing is stored when it is rejected.
@@ -251,6 +219,7 @@ impl State {
             }
             let edge = self.model.graph.edges()[e];
             let (i, j) = (edge.from, edge.to);
+            let mut wait = false;
             match (self.model.joined[i], self.model.joined[j]) {
                 (true, true) => {
                     // a new loop closure between mapped keyframes enters
@@ -258,7 +227,16 @@ impl State {
                     if self.outliers.switchable(&edge) {
                         let (xi, xj) = (&self.estimate[i], &self.estimate[j]);
                         self.model.switch[e] = self.outliers.arrival_switch(&edge, xi, xj);
+                        let run = self.outliers.drift_run;
+                        if run > 0 && self.model.switch[e] < OFF_BELOW {
+                            let phi = self.outliers.arrival_phi;
+                            if self.drift.rejected(&edge, xi, xj, i.max(j), phi) >= run {
+                                self.drifted = true;
+                                self.drift.clear();
+                            }
+                        }
                     }
+                    wait = self.may_wait(e);
                 }
                 (false, false) => {
                     for k in [i, j] {
@@ -296,12 +274,43 @@ impl State {
             self.model.incident[i].push(e as u32);
             self.model.incident[j].push(e as u32);
             let s = self.model.weight(e);
+            if wait {
+                // its χ² joins the budget in refresh_edge
+                self.deferred.push(e, 0.0);
+            }
             if s != 0.0 {
                 self.contribute(e, s)?;
             }
             self.refresh_edge(e);
         }
         Ok(())
+    }
+
+    /// Whether loop closure `e`, between joined keyframes, may wait out of
+    /// the Gauss–Newton factor: its newer keyframe is already pulled by a
+    /// loop closure in the factor, and its χ² at the estimate fits the
+    /// budget. Odometry always enters (its update path is short), and so
+    /// does a keyframe's first loop closure: with all of them waiting, the
+    /// keyframes after it joined dead-reckoned, and the Gauss–Newton step
+    /// that came when they entered was far from its linearisation point
+    /// (Manhattan snapshots 1.54× their prefix's optimum at a 2% budget).
+    fn may_wait(&self, e: usize) -> bool {
+        let edge = &self.model.graph.edges()[e];
+        if self.gn.is_none() || edge.kind == EdgeKind::Odometry {
+            return false;
+        }
+        let newer = edge.from.max(edge.to);
+        let edges = self.model.graph.edges();
+        let pulled = self.model.incident[newer].iter().any(|&f| {
+            let f = f as usize;
+            edges[f].kind != EdgeKind::Odometry && self.model.weight(f) > 0.0 && !self.deferred.waits(f)
+        });
+        let s = self.model.weight(e);
+        pulled
+            && s > 0.0
+            && self
+                .deferred
+                .admits(s * edge_chi2(edge, &self.estimate), self.chi2)
     }
 
     /// Keyframe `k` joins through an edge from `anchor`, at `guess`.
@@ -319,13 +328,22 @@ impl State {
         }
     }
 
+    /// Adds `delta` times edge `e`'s terms to every solver it is in.
     fn contribute(&mut self, e: usize, delta: f64) -> Result<(), EngineError> {
+        self.contribute_gn(e, delta)?;
         let edge = self.model.graph.edges()[e];
-        if let Some(gn) = &mut self.gn {
-            gn.apply_edge(&edge, delta).map_err(EngineError::Numeric)?;
-        }
         if let Some(l) = &mut self.linear {
             l.apply_edge(e, &edge, delta).map_err(EngineError::Numeric)?;
+        }
+        Ok(())
+    }
+
+    /// Adds `delta` times edge `e`'s terms to the Gauss–Newton factor,
+    /// unless it waits.
+    fn contribute_gn(&mut self, e: usize, delta: f64) -> Result<(), EngineError> {
+        let edge = self.model.graph.edges()[e];
+        if let Some(gn) = self.gn.as_mut().filter(|_| !self.deferred.waits(e)) {
+            gn.apply_edge(&edge, delta).map_err(EngineError::Numeric)?;
         }
         Ok(())
     }
@@ -335,6 +353,7 @@ impl State {
         let edge = &self.model.graph.edges()[e];
         let v = self.model.weight(e) * edge_chi2(edge, &self.estimate);
         self.chi2 += v - self.edge_chi2[e];
+        self.deferred.refresh(e, self.edge_chi2[e], v);
         self.edge_chi2[e] = v;
     }
 
@@ -342,6 +361,27 @@ impl State {
     /// cached χ² with it. Returns the number of keyframes that moved.
     pub fn solve(&mut self, threshold: f64) -> Result<usize, EngineError> {
         let connected = self.connect_pending().and(self.apply_fixes());
+        let mut moved = self.solve_factor(threshold);
+        connected?;
+        // the estimate moved: waiting loop closures over budget enter, and
+        // the solve that follows moves it again; each round takes one in
+        // at least, so this ends
+        loop {
+            let mut entered = false;
+            while let Some(e) = self.deferred.pop_over_budget(self.chi2, &self.edge_chi2) {
+                self.contribute_gn(e, self.model.weight(e))?;
+                entered = true;
+            }
+            if !entered {
+                return Ok(moved);
+            }
+            moved = moved.max(self.solve_factor(threshold));
+        }
+    }
+
+    /// Solves the source's factor and refreshes the estimate and its χ².
+    /// Returns the number of keyframes that moved.
+    fn solve_factor(&mut self, threshold: f64) -> usize {
         let changed = match self.source {
             SnapshotSource::GaussNewton => {
                 let gn = self.gn.as_mut().expect("Gauss–Newton source");
@@ -360,7 +400,6 @@ impl State {
                 changed
             }
         };
-        connected?;
         if changed.len() * 4 > self.model.graph.len() {
             self.recompute_chi2();
         } else {
@@ -374,7 +413,7 @@ impl State {
                 }
             }
         }
-        Ok(changed.len())
+        changed.len()
     }
 
     fn stamp_edge(&mut self, e: usize) -> bool {
@@ -397,11 +436,29 @@ impl State {
             };
         }
         self.chi2 = self.edge_chi2.iter().sum();
+        self.deferred.recount(&self.edge_chi2);
     }
 
     /// χ² of the estimate over the applied edges, with their weights.
     pub fn chi2(&self) -> f64 {
         self.chi2
+    }
+
+    /// χ² of the estimate over the edges in the factor: what the
+    /// Gauss–Newton model predicts (the waiting loop closures left out).
+    pub fn factor_chi2(&self) -> f64 {
+        self.chi2 - self.deferred.chi2()
+    }
+
+    /// Whether a run of agreeing rejected loop closures said the map
+    /// drifted since the last call.
+    pub fn take_drifted(&mut self) -> bool {
+        std::mem::take(&mut self.drifted)
+    }
+
+    /// Loop closures waiting out of the factor now, and their χ².
+    pub fn deferred(&self) -> (usize, f64) {
+        (self.deferred.len(), self.deferred.chi2())
     }
 
     /// The estimate of every keyframe slot (meaningful where joined).
@@ -518,6 +575,9 @@ impl State {
             chi2: 0.0,
             epoch: 0,
             outliers: config.outliers,
+            deferred: Deferred::new(config.defer_budget),
+            drift: DriftRun::default(),
+            drifted: false,
         };
         state.recompute_chi2();
         Ok(state)

@@ -13,10 +13,12 @@
 //! Odometry is never switched.
 
 pub mod cycles;
+pub mod drift;
 pub mod kernel;
 mod robust;
 
 pub use cycles::{CycleCheck, CycleParams, Verdict};
+pub use drift::DriftRun;
 pub use kernel::Kernel;
 pub use robust::{robust_polish, RobustSolution, DORMANT_BELOW, PROBE_ITERATIONS, PRUNE_RATIO};
 
@@ -36,6 +38,10 @@ pub struct OutlierConfig {
     /// measured against has not seen it yet and may carry drift, so the
     /// arrival gate is wider than the kernel the re-solve applies.
     pub arrival_phi: f64,
+    /// This many agreeing loop closures switched off on arrival in a row
+    /// mean the map drifted, not that they are wrong: the engine re-solves
+    /// at once (see [`drift`]; 0: never). Twice Vertigo's group of ten.
+    pub drift_run: usize,
     /// Run paper A's cycle test before the kernel.
     pub cycles: bool,
     /// Its parameters.
@@ -48,6 +54,7 @@ impl Default for OutlierConfig {
             enabled: true,
             kernel: Kernel::default(),
             arrival_phi: 16.27,
+            drift_run: 20,
             cycles: false,
             cycle: CycleParams::default(),
         }

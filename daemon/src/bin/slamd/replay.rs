@@ -59,6 +59,14 @@ pub struct ReplayOpts {
     /// Keyframes kept last in a fresh ordering (--embedded).
     #[arg(long)]
     pub recent_last: Option<usize>,
+    /// Refresh every this many edges between re-solves (--embedded; 0:
+    /// never).
+    #[arg(long)]
+    pub refresh_every: Option<usize>,
+    /// Budget of the loop closures waiting out of the factor, as a fraction
+    /// of the estimate's χ² (--embedded; 0: every edge enters at once).
+    #[arg(long)]
+    pub defer_budget: Option<f64>,
     #[command(flatten)]
     pub gps: crate::gps::GpsOpts,
     #[command(flatten)]
@@ -491,7 +499,7 @@ pub fn run(opts: ReplayOpts) -> anyhow::Result<()> {
         .as_ref()
         .and_then(|t| slamd::eval::ate(&graph, &out.poses, t))
         .map(|a| a.rmse);
-    let worst_ratio = out
+    let ratios = out
         .checked
         .iter()
         .map(|(k, poses)| {
@@ -503,11 +511,10 @@ pub fn run(opts: ReplayOpts) -> anyhow::Result<()> {
                     ..Default::default()
                 },
             )?;
-            Ok(chi2(&prefix, poses) / best.chi2.max(f64::MIN_POSITIVE))
+            Ok((k + 1, chi2(&prefix, poses) / best.chi2.max(f64::MIN_POSITIVE)))
         })
-        .collect::<anyhow::Result<Vec<f64>>>()?
-        .into_iter()
-        .fold(None, |w: Option<f64>, r| Some(w.map_or(r, |w| w.max(r))));
+        .collect::<anyhow::Result<Vec<(usize, f64)>>>()?;
+    let worst_ratio = ratios.iter().map(|&(_, r)| r).reduce(f64::max);
     let robust = crate::robust::Rejected::of(&graph, out.switches.as_deref());
     let lat = Latency::of(out.latencies);
     if opts.json {
@@ -525,6 +532,7 @@ pub fn run(opts: ReplayOpts) -> anyhow::Result<()> {
             "ate": ate,
             "prefixes_checked": out.checked.len(),
             "worst_prefix_ratio": worst_ratio,
+            "prefix_ratios": ratios,
             "loop_closures": robust.loop_closures,
             "switched_off": robust.rejected.len(),
             "rejected_edges": out.switches.as_ref().map(|_| &robust.rejected),
@@ -583,6 +591,12 @@ fn engine_config(opts: &ReplayOpts, config: &Config) -> EngineConfig {
     }
     if let Some(r) = opts.recent_last {
         c.recent_last = r;
+    }
+    if let Some(n) = opts.refresh_every {
+        c.refresh_every_edges = n;
+    }
+    if let Some(b) = opts.defer_budget {
+        c.defer_budget = b;
     }
     if let Some(o) = opts.gps.gps_origin {
         c.gps.origin = Some(o);

@@ -1,0 +1,77 @@
+//! [`EngineConfig`]: the engine's tuning, with the defaults the replay
+//! benchmarks chose.
+
+use super::SnapshotSource;
+use crate::gps::GpsConfig;
+use crate::nonlinear::LevenbergMarquardtParams;
+use crate::outliers::OutlierConfig;
+
+/// Tuning of the [`Engine`](super::Engine). The defaults are what the replay benchmarks
+/// measured best on City10000 and Manhattan.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default)]
+pub struct EngineConfig {
+    /// Re-solve after this many new edges (0: never on count).
+    pub resolve_every_edges: usize,
+    /// Between re-solves, refresh after this many new edges when the
+    /// background thread is free: relinearise every edge at the estimate
+    /// and refactorise with a fresh ordering, without the polish (one
+    /// Gauss–Newton iteration; 0: never).
+    pub refresh_every_edges: usize,
+    /// Re-solve when the factor holds this many times the entries it had
+    /// after the last re-solve (0: never on fill).
+    pub resolve_fill_ratio: f64,
+    /// Run re-solves on a background thread; else inline, blocking.
+    pub background: bool,
+    /// A column whose solution moves by at most this much does not pass the
+    /// change to its subtree (iSAM2's wildfire; m and rad). 0 is exact.
+    pub wildfire_threshold: f64,
+    /// Re-solve at once, inline, when the estimate's true χ² exceeds this
+    /// multiple of the χ² its linear model predicts (plus 1): the
+    /// linearisation point is too far from the estimate, as after a large
+    /// loop closure (0: never). A running re-solve is abandoned.
+    pub nonlinear_ratio: f64,
+    /// Keyframes kept last in a fresh ordering.
+    pub recent_last: usize,
+    /// A loop closure that agrees with the estimate waits out of the
+    /// Gauss–Newton factor for the next re-solve while the waiting ones'
+    /// χ² stays within this fraction of the estimate's (their cost still
+    /// counts; past it, the worst enter). A keyframe's first loop closure
+    /// always enters. 0 (the default): every edge enters at once; 0.05 made
+    /// City10000 about 15% faster, and Manhattan's worst sampled snapshot
+    /// 1.31-1.54× its prefix's optimum against 1.30-1.39× (README).
+    pub defer_budget: f64,
+    /// What the published estimate is between re-solves.
+    pub snapshot: SnapshotSource,
+    /// Keep the exact two-stage linear solution even when it is not the
+    /// snapshot source.
+    pub linear_stages: bool,
+    /// The polish of each re-solve.
+    pub polish: LevenbergMarquardtParams,
+    /// The outlier filter of loop closures.
+    pub outliers: OutlierConfig,
+    /// GPS: the ENU origin and how fixes weigh (the configuration's `[gps]`
+    /// section; see [`Config::engine`](crate::config::Config::engine)).
+    #[serde(skip)]
+    pub gps: GpsConfig,
+}
+
+impl Default for EngineConfig {
+    fn default() -> Self {
+        Self {
+            resolve_every_edges: 1000,
+            refresh_every_edges: 50,
+            resolve_fill_ratio: 2.0,
+            background: true,
+            wildfire_threshold: 1e-4,
+            nonlinear_ratio: 1.5,
+            recent_last: 32,
+            defer_budget: 0.0,
+            snapshot: SnapshotSource::default(),
+            linear_stages: false,
+            polish: LevenbergMarquardtParams::default(),
+            outliers: OutlierConfig::default(),
+            gps: GpsConfig::default(),
+        }
+    }
+}

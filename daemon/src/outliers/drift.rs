@@ -1,0 +1,115 @@
+//! [`DriftRun`]: telling a drifted map from wrong loop closures at arrival.
+//!
+//! A loop closure `(i, j)` enters with the switch its error has under the
+//! current estimate. After a long loop the estimate of `j` carries drift,
+//! so the first true loop closure is switched off, and so is every one
+//! after it: the keyframes that follow are dead-reckoned from `j`, and the
+//! off switches weigh nothing, so no update corrects them (City10000
+//! snapshots reached 10⁵ times their prefix's optimum until a re-solve).
+//!
+//! What sets such a run apart is agreement. Each rejected loop closure
+//! implies a pose `x̂_j = x_i ∘ Z_ij` and so a correction of the map,
+//! `C = x̂_j ∘ x_j⁻¹`; a rigidly drifted chain gives the same `C` for every
+//! loop closure along it. Two loop closures agree when the previous one's
+//! correction predicts this one's pose, `C_prev ∘ x_j`, within the arrival
+//! gate (`eᵀ Ω e ≤ Φ` with this edge's information). Random wrong loop
+//! closures disagree; Vertigo's grouped ones agree in groups of ten. A run
+//! of agreeing rejections longer than any such group means the map
+//! drifted, and the engine re-solves at once.
+
+use crate::geometry::Pose2;
+use crate::graph::Edge;
+
+/// Keyframes a run may skip between two of its loop closures.
+pub const RUN_GAP: usize = 50;
+
+/// The current run of agreeing rejected loop closures.
+#[derive(Clone, Debug, Default)]
+pub struct DriftRun {
+    /// The newer keyframe and the correction of the run's last member.
+    last: Option<(usize, Pose2)>,
+    len: usize,
+}
+
+impl DriftRun {
+    /// Records that `edge` (between keyframes at `xi`, `xj`; `newer` is the
+    /// index of its newer end) was switched off on arrival. Returns the
+    /// length of the run it now belongs to.
+    pub fn rejected(&mut self, edge: &Edge, xi: &Pose2, xj: &Pose2, newer: usize, phi: f64) -> usize {
+        let implied = xi.compose(&edge.measurement);
+        let correction = implied.compose(&xj.inverse());
+        let agrees = self.last.is_some_and(|(k, previous)| {
+            let e = previous.compose(xj).between(&implied).to_array();
+            newer.abs_diff(k) <= RUN_GAP && edge.information.mahalanobis(&e) <= phi
+        });
+        self.len = if agrees { self.len + 1 } else { 1 };
+        self.last = Some((newer, correction));
+        self.len
+    }
+
+    /// Ends the run (the map was corrected).
+    pub fn clear(&mut self) {
+        *self = Self::default();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::graph::{EdgeKind, Information};
+
+    fn edge(from: usize, to: usize, z: Pose2) -> Edge {
+        Edge {
+            from,
+            to,
+            measurement: z,
+            information: Information::identity(),
+            kind: EdgeKind::LoopClosure,
+        }
+    }
+
+    #[test]
+    fn a_drifted_chain_gives_agreeing_rejections() {
+        // the true map: keyframe k at (k, 0); the estimate of the chain from
+        // keyframe 100 on is rotated by 0.3 rad about the origin and moved
+        let drift = Pose2::new(2.0, -1.0, 0.3);
+        let truth = |k: usize| Pose2::new(k as f64, 0.0, 0.0);
+        let mut run = DriftRun::default();
+        for (n, j) in (100..125).enumerate() {
+            let i = j - 100;
+            let z = truth(i).between(&truth(j));
+            let xj = drift.compose(&truth(j));
+            assert_eq!(run.rejected(&edge(i, j, z), &truth(i), &xj, j, 16.27), n + 1);
+        }
+    }
+
+    #[test]
+    fn random_wrong_loop_closures_disagree() {
+        let truth = |k: usize| Pose2::new(k as f64, 0.0, 0.0);
+        let mut run = DriftRun::default();
+        // each one claims a different, large offset
+        for (n, j) in (100..110).enumerate() {
+            let z = Pose2::new(5.0 * n as f64, -3.0 * n as f64, 0.4 * n as f64);
+            let len = run.rejected(&edge(j - 50, j, z), &truth(j - 50), &truth(j), j, 16.27);
+            assert_eq!(len, 1, "rejection {n}");
+        }
+    }
+
+    #[test]
+    fn a_gap_longer_than_run_gap_starts_a_new_run() {
+        let truth = |k: usize| Pose2::new(k as f64, 0.0, 0.0);
+        let drift = Pose2::new(1.0, 1.0, 0.1);
+        let mut run = DriftRun::default();
+        for (j, expected) in [(100, 1), (101, 2), (101 + RUN_GAP + 1, 1)] {
+            let z = truth(0).between(&truth(j));
+            let xj = drift.compose(&truth(j));
+            assert_eq!(run.rejected(&edge(0, j, z), &truth(0), &xj, j, 16.27), expected);
+        }
+        run.clear();
+        let z = truth(0).between(&truth(300));
+        assert_eq!(
+            run.rejected(&edge(0, 300, z), &truth(0), &truth(300), 300, 16.27),
+            1
+        );
+    }
+}
