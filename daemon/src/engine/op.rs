@@ -30,8 +30,8 @@ pub enum Op {
     },
 }
 
-/// How [`State::rebuild`] moves the linearisation point before it
-/// refactorises.
+/// How [`State::rebuild`](super::state::State::rebuild) moves the
+/// linearisation point before it refactorises.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Polish {
     /// The re-solve's: the robust multi-start polish that sets the outlier
