@@ -146,6 +146,15 @@ fn incremental_two_stage_equals_batch_on_dataset_prefixes() {
     }
 }
 
+/// χ² of the batch optimum of `g` (two-stage start, polished).
+fn optimum(g: &PoseGraph) -> f64 {
+    let options = BatchOptions {
+        polish: true,
+        ..Default::default()
+    };
+    solve_batch(g, &options).expect("a connected graph").chi2
+}
+
 fn snapshot_poses(engine: &Engine) -> Vec<Pose2> {
     engine.snapshot().poses().map(|(_, p)| p).collect()
 }
@@ -186,15 +195,8 @@ fn snapshots_stay_near_their_prefix_optimum_and_the_end_is_optimal() {
     });
     for (k, poses) in checked {
         let prefix = g.prefix(k + 1);
-        let best = solve_batch(
-            &prefix,
-            &BatchOptions {
-                polish: true,
-                ..Default::default()
-            },
-        )
-        .unwrap();
-        let ratio = chi2(&prefix, &poses) / best.chi2;
+        let best = optimum(&prefix);
+        let ratio = chi2(&prefix, &poses) / best;
         assert!(
             ratio <= 1.3,
             "keyframe {k}: snapshot χ² {ratio:.3}× the prefix optimum"
@@ -202,19 +204,8 @@ fn snapshots_stay_near_their_prefix_optimum_and_the_end_is_optimal() {
     }
     engine.resolve_now();
     let end = chi2(&g, &snapshot_poses(&engine));
-    let best = solve_batch(
-        &g,
-        &BatchOptions {
-            polish: true,
-            ..Default::default()
-        },
-    )
-    .unwrap();
-    assert!(
-        end <= 1.001 * best.chi2,
-        "after the re-solve: {end} vs {}",
-        best.chi2
-    );
+    let best = optimum(&g);
+    assert!(end <= 1.001 * best, "after the re-solve: {end} vs {best}");
 }
 
 #[test]
@@ -346,15 +337,7 @@ fn the_closing_resolve_polishes_what_arrived_after_a_background_resolve() {
         }
     }
     engine.resolve_now();
-    let best = solve_batch(
-        &g,
-        &BatchOptions {
-            polish: true,
-            ..Default::default()
-        },
-    )
-    .unwrap()
-    .chi2;
+    let best = optimum(&g);
     let got = chi2(&g, &snapshot_poses(&engine));
     assert!(
         (got - best).abs() <= 1e-6 * best,
@@ -388,14 +371,6 @@ fn waiting_loop_closures_stay_within_their_budget_and_the_end_is_optimal() {
     engine.resolve_now();
     assert_eq!(engine.stats().deferred, 0, "a re-solve factorises every edge");
     let end = chi2(&g, &snapshot_poses(&engine));
-    let best = solve_batch(
-        &g,
-        &BatchOptions {
-            polish: true,
-            ..Default::default()
-        },
-    )
-    .unwrap()
-    .chi2;
+    let best = optimum(&g);
     assert!(end <= 1.001 * best, "after the re-solve: {end} vs {best}");
 }

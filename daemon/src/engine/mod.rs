@@ -425,10 +425,11 @@ impl Engine {
 
     /// Work counters.
     pub fn stats(&self) -> EngineStats {
+        let (deferred, deferred_chi2) = self.state.deferred();
         EngineStats {
             factor_nnz: self.state.factor_nnz(),
-            deferred: self.state.deferred().0,
-            deferred_chi2: self.state.deferred().1,
+            deferred,
+            deferred_chi2,
             ..self.stats
         }
     }

@@ -295,12 +295,12 @@ impl State {
     /// that came when they entered was far from its linearisation point
     /// (Manhattan snapshots 1.54× their prefix's optimum at a 2% budget).
     fn may_wait(&self, e: usize) -> bool {
-        let edge = &self.model.graph.edges()[e];
-        if self.gn.is_none() || edge.kind == EdgeKind::Odometry {
+        let edges = self.model.graph.edges();
+        let edge = &edges[e];
+        if !self.deferred.enabled() || self.gn.is_none() || edge.kind == EdgeKind::Odometry {
             return false;
         }
         let newer = edge.from.max(edge.to);
-        let edges = self.model.graph.edges();
         let pulled = self.model.incident[newer].iter().any(|&f| {
             let f = f as usize;
             edges[f].kind != EdgeKind::Odometry && self.model.weight(f) > 0.0 && !self.deferred.waits(f)
