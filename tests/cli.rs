@@ -94,3 +94,17 @@ fn a_kernel_parameter_out_of_range_is_refused_by_name() {
         assert!(err.contains(says), "{arg}: {err}");
     }
 }
+
+#[test]
+fn a_defer_budget_out_of_range_is_refused_by_name() {
+    let ring = dataset("ring.g2o");
+    let ring = ring.to_str().expect("utf-8");
+    for arg in ["--defer-budget=-0.5", "--defer-budget=nan", "--defer-budget=inf"] {
+        let (code, _, err) = run_slamd(&["replay", ring, "--embedded", arg]);
+        assert_eq!(code, 2, "{arg}: {err}");
+        assert!(
+            err.contains("--defer-budget must be a number ≥ 0"),
+            "{arg}: {err}"
+        );
+    }
+}

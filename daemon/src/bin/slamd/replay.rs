@@ -454,6 +454,9 @@ pub fn replay(
 
 pub fn run(opts: ReplayOpts) -> anyhow::Result<()> {
     let config = crate::run::load_config(opts.config.as_deref(), opts.namespace.as_deref())?;
+    if opts.defer_budget.is_some_and(|b| !(b.is_finite() && b >= 0.0)) {
+        bail!("--defer-budget must be a number ≥ 0");
+    }
     let graph = io::read_graph(&opts.file)?;
     graph.check_connected()?;
     let truth = opts
