@@ -36,6 +36,13 @@ pub trait Scalar:
     fn to_c64(self) -> c64;
     /// Multiplies by a real number.
     fn scale(self, r: f64) -> Self;
+    /// Three steps of a multiple-rank update over a run of rows (see
+    /// `sparse::dynamic::runs`); reals take a vectorised path when the CPU
+    /// has one.
+    #[inline]
+    fn rank3_run(w: [&mut [Self]; 3], l: &mut [Self], p: &[Self], g: &[Self]) {
+        crate::sparse::dynamic::runs::rank3_run_generic(w, l, p, g)
+    }
 }
 
 impl Scalar for f64 {
@@ -62,6 +69,15 @@ impl Scalar for f64 {
     #[inline]
     fn scale(self, r: f64) -> Self {
         self * r
+    }
+    #[inline]
+    fn rank3_run(w: [&mut [Self]; 3], l: &mut [Self], p: &[Self], g: &[Self]) {
+        #[cfg(target_arch = "x86_64")]
+        if l.len() >= 8 && std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU has AVX2
+            return unsafe { crate::sparse::dynamic::runs::rank3_run_avx2(w, l, p, g) };
+        }
+        crate::sparse::dynamic::runs::rank3_run_generic(w, l, p, g)
     }
 }
 

@@ -7,7 +7,7 @@ use faer::linalg::cholesky::ldlt::factor::LdltRegularization;
 use faer::sparse::linalg::cholesky::{
     factorize_symbolic_cholesky, CholeskySymbolicParams, SymbolicCholeskyRaw, SymmetricOrdering,
 };
-use faer::sparse::linalg::SupernodalThreshold;
+use faer::sparse::linalg::{SupernodalThreshold, SymbolicSupernodalParams};
 use faer::{Par, Side, Spec};
 
 /// One column of `L` below the diagonal.
@@ -15,6 +15,17 @@ use faer::{Par, Side, Spec};
 pub(crate) struct Column<T> {
     pub(crate) rows: Vec<u32>,
     pub(crate) vals: Vec<T>,
+    /// Where each run of consecutive rows starts (see `runs`); kept
+    /// with `rows`.
+    pub(crate) starts: Vec<u32>,
+}
+
+impl<T> Column<T> {
+    fn new(rows: Vec<u32>, vals: Vec<T>) -> Self {
+        let mut starts = Vec::new();
+        super::runs::run_starts(&rows, &mut starts);
+        Self { rows, vals, starts }
+    }
 }
 
 /// A sparse `L D Lᴴ` factor in the elimination order (column `k` is the
@@ -24,9 +35,9 @@ pub struct DynamicLdlt<T> {
     pub(crate) cols: Vec<Column<T>>,
     pub(crate) d: Vec<f64>,
     pub(crate) children: Vec<Vec<u32>>,
-    /// Dense accumulators for the `w_t`, interleaved (`MAX_RANK` per
-    /// row), all zero between calls.
-    pub(crate) work: Vec<T>,
+    /// Dense accumulators for the `w_t`, one vector per slot `t` (so that
+    /// a run of rows is a slice), all zero between calls.
+    pub(crate) work: Vec<Vec<T>>,
     pub(crate) scratch_rows: Vec<u32>,
     pub(crate) scratch_vals: Vec<T>,
     pub(crate) carry: Vec<u32>,
@@ -43,7 +54,7 @@ impl<T: Scalar> DynamicLdlt<T> {
             cols: Vec::new(),
             d: Vec::new(),
             children: Vec::new(),
-            work: Vec::new(),
+            work: vec![Vec::new(); super::update::MAX_RANK],
             scratch_rows: Vec::new(),
             scratch_vals: Vec::new(),
             carry: Vec::new(),
@@ -52,14 +63,28 @@ impl<T: Scalar> DynamicLdlt<T> {
         }
     }
 
-    /// Factorises `P A Pᵀ` with faer's simplicial LDLᴴ, where `perm[k]` is
-    /// the variable of `a` eliminated `k`-th. Column `k` of the result is
-    /// variable `perm[k]`.
+    /// Factorises `P A Pᵀ` with faer's LDLᴴ, where `perm[k]` is the
+    /// variable of `a` eliminated `k`-th. Column `k` of the result is
+    /// variable `perm[k]`. faer picks a supernodal factorisation where it
+    /// pays (dense blocks: City10000's Gauss–Newton system at 9,000 poses
+    /// in a fraction of the simplicial time); fundamental supernodes only,
+    /// so that the columns keep their exact patterns.
     pub fn from_matrix(a: &UpperCsc<T>, perm: &[usize]) -> Result<Self, FactorError> {
+        Self::from_matrix_with(a, perm, SupernodalThreshold::AUTO)
+    }
+
+    /// [`Self::from_matrix`] with faer's choice between simplicial and
+    /// supernodal set by `threshold` (tests force each).
+    pub(crate) fn from_matrix_with(
+        a: &UpperCsc<T>,
+        perm: &[usize],
+        threshold: SupernodalThreshold,
+    ) -> Result<Self, FactorError> {
         let n = a.n();
         let inv = crate::sparse::ordering::invert(perm);
         let params = CholeskySymbolicParams {
-            supernodal_flop_ratio_threshold: SupernodalThreshold::FORCE_SIMPLICIAL,
+            supernodal_flop_ratio_threshold: threshold,
+            supernodal_params: SymbolicSupernodalParams { relax: None },
             ..Default::default()
         };
         let order = SymmetricOrdering::Custom(faer::perm::PermRef::new_checked(perm, &inv, n));
@@ -81,27 +106,58 @@ impl<T: Scalar> DynamicLdlt<T> {
             .map_err(|e| match e {
                 LdltError::ZeroPivot { index } => FactorError::NotPositiveDefinite { step: index },
             })?;
-        let SymbolicCholeskyRaw::Simplicial(s) = symbolic.raw() else {
-            return Err(FactorError::Symbolic);
-        };
-        let (col_ptr, row_idx) = (s.col_ptr(), s.row_idx());
         let mut f = Self::new();
-        for k in 0..n {
-            let (start, end) = (col_ptr[k], col_ptr[k + 1]);
-            // faer stores D_k as the first (diagonal) entry of column k
-            let dk = values[start].real();
-            if dk.is_nan() || dk <= 0.0 {
-                return Err(FactorError::NotPositiveDefinite { step: k });
+        match symbolic.raw() {
+            SymbolicCholeskyRaw::Simplicial(s) => {
+                let (col_ptr, row_idx) = (s.col_ptr(), s.row_idx());
+                for k in 0..n {
+                    let (start, end) = (col_ptr[k], col_ptr[k + 1]);
+                    // faer stores D_k as the first (diagonal) entry of column k
+                    f.push_column(
+                        k,
+                        values[start].real(),
+                        row_idx[start + 1..end].iter().map(|&r| r as u32).collect(),
+                        values[start + 1..end].to_vec(),
+                    )?;
+                }
             }
-            f.d.push(dk);
-            f.cols.push(Column {
-                rows: row_idx[start + 1..end].iter().map(|&r| r as u32).collect(),
-                vals: values[start + 1..end].to_vec(),
-            });
+            SymbolicCholeskyRaw::Supernodal(s) => {
+                // supernode `s`: columns `begin..end`, a dense column-major
+                // block whose rows are its own columns (D on the diagonal, L
+                // below), then its pattern
+                let (rows_at, vals_at, row_idx) = (s.col_ptr_for_row_idx(), s.col_ptr_for_val(), s.row_idx());
+                for (sn, (&begin, &end)) in s.supernode_begin().iter().zip(s.supernode_end()).enumerate() {
+                    let pattern = &row_idx[rows_at[sn]..rows_at[sn + 1]];
+                    let width = end - begin;
+                    let height = width + pattern.len();
+                    let block = &values[vals_at[sn]..vals_at[sn + 1]];
+                    for c in 0..width {
+                        let col = &block[c * height..(c + 1) * height];
+                        let rows = (begin + c + 1..end).map(|r| r as u32);
+                        f.push_column(
+                            begin + c,
+                            col[c].real(),
+                            rows.chain(pattern.iter().map(|&r| r as u32)).collect(),
+                            col[c + 1..].to_vec(),
+                        )?;
+                    }
+                }
+            }
         }
-        f.work = vec![T::default(); n * super::update::MAX_RANK];
+        f.work = vec![vec![T::default(); n]; super::update::MAX_RANK];
         f.rebuild_children();
         Ok(f)
+    }
+
+    /// Appends column `k` of a fresh factor, refusing a pivot that is not
+    /// positive.
+    fn push_column(&mut self, k: usize, d: f64, rows: Vec<u32>, vals: Vec<T>) -> Result<(), FactorError> {
+        if d.is_nan() || d <= 0.0 {
+            return Err(FactorError::NotPositiveDefinite { step: k });
+        }
+        self.d.push(d);
+        self.cols.push(Column::new(rows, vals));
+        Ok(())
     }
 
     /// Adds a variable as the last column, uncoupled, with `D = 0` until an
@@ -110,7 +166,7 @@ impl<T: Scalar> DynamicLdlt<T> {
         self.cols.push(Column::default());
         self.d.push(0.0);
         self.children.push(Vec::new());
-        self.work.extend([T::default(); super::update::MAX_RANK]);
+        self.work.iter_mut().for_each(|w| w.push(T::default()));
         self.cols.len() - 1
     }
 
@@ -148,6 +204,12 @@ impl<T: Scalar> DynamicLdlt<T> {
     /// Rows and values of column `k` of `L` below the diagonal.
     pub fn column(&self, k: usize) -> (&[u32], &[T]) {
         (&self.cols[k].rows, &self.cols[k].vals)
+    }
+
+    /// Column `k` with where its runs of consecutive rows start.
+    pub(crate) fn column_runs(&self, k: usize) -> (&[u32], &[T], &[u32]) {
+        let c = &self.cols[k];
+        (&c.rows, &c.vals, &c.starts)
     }
 
     pub(crate) fn rebuild_children(&mut self) {

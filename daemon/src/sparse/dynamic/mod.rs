@@ -11,11 +11,14 @@
 //!   re-solving only the affected paths and subtrees.
 //!
 //! Columns are stored one per `Vec` (rows sorted, strictly below the
-//! diagonal), so that fill can grow any column. `L` is unit lower
-//! triangular and `D` real positive. A fresh factor comes from faer's
-//! simplicial LDLᴴ ([`DynamicLdlt::from_matrix`]).
+//! diagonal), so that fill can grow any column, with where their runs of
+//! consecutive rows start: near the root the columns are nearly dense, and
+//! the inner loops run over those runs as slices (module `runs`). `L` is
+//! unit lower triangular and `D` real positive. A fresh factor comes from
+//! faer's LDLᴴ, simplicial or supernodal ([`DynamicLdlt::from_matrix`]).
 
 mod factor;
+pub(crate) mod runs;
 mod solve;
 mod update;
 

@@ -23,6 +23,7 @@
 //! stage solves a real Laplacian for complex positions.
 
 use super::factor::DynamicLdlt;
+use super::runs::{gather_dot, scatter_add};
 use super::update::UpdateError;
 use crate::sparse::Scalar;
 use std::collections::BinaryHeap;
@@ -152,10 +153,7 @@ impl<M: Scalar, V: Scalar + Mul<M, Output = V>> IncrementalCholesky<M, V> {
         for &i in &self.dirty_list {
             let yi = self.b[i] - self.c[i];
             self.y[i] = yi;
-            let (rows, vals) = self.factor.column(i);
-            for (&r, &l) in rows.iter().zip(vals) {
-                self.c[r as usize] += yi * l;
-            }
+            scatter_add(&mut self.c, self.factor.column_runs(i), yi);
         }
         let mut heap: BinaryHeap<usize> = self.dirty_list.iter().copied().collect();
         for &i in &self.dirty_list {
@@ -193,12 +191,7 @@ impl<M: Scalar, V: Scalar + Mul<M, Output = V>> IncrementalCholesky<M, V> {
         if d <= 0.0 {
             return V::default();
         }
-        let (rows, vals) = self.factor.column(j);
-        let mut s = self.y[j].scale(1.0 / d);
-        for (&r, &l) in rows.iter().zip(vals) {
-            s -= self.x[r as usize] * l.conjugate();
-        }
-        s
+        self.y[j].scale(1.0 / d) - gather_dot(&self.x, self.factor.column_runs(j))
     }
 
     /// Recomputes `y`, `c` and `x` from scratch.
@@ -225,8 +218,5 @@ impl<M: Scalar, V: Scalar + Mul<M, Output = V>> IncrementalCholesky<M, V> {
 
 /// Removes column `j`'s part `L_rj y_j` from the `c` of its rows.
 fn retire<M: Scalar, V: Scalar + Mul<M, Output = V>>(f: &DynamicLdlt<M>, j: usize, y: &[V], c: &mut [V]) {
-    let (rows, vals) = f.column(j);
-    for (&r, &l) in rows.iter().zip(vals) {
-        c[r as usize] -= y[j] * l;
-    }
+    scatter_add(c, f.column_runs(j), -y[j]);
 }

@@ -1,9 +1,10 @@
 //! Property tests: every sequence of appends, updates and downdates keeps
 //! `L D Lᴴ = A`, and the incremental solve matches a dense solve.
 
-use super::{DynamicLdlt, IncrementalCholesky};
+use super::{DynamicLdlt, IncrementalCholesky, MAX_RANK};
 use crate::sparse::{Scalar, UpperCsc};
 use faer::c64;
+use faer::sparse::linalg::SupernodalThreshold;
 use nalgebra::DMatrix;
 use proptest::prelude::*;
 
@@ -92,7 +93,14 @@ fn run<M: FromParts, V: FromParts + std::ops::Mul<M, Output = V>>(
             .wrapping_add(1442695040888963407);
         perm.swap(i, (s >> 33) as usize % (i + 1));
     }
-    let f = DynamicLdlt::<M>::from_matrix(&a, &perm).map_err(|e| TestCaseError::fail(e.to_string()))?;
+    // both of faer's kinds of fresh factor
+    let kind = if perm_seed.is_multiple_of(2) {
+        SupernodalThreshold::FORCE_SIMPLICIAL
+    } else {
+        SupernodalThreshold::FORCE_SUPERNODAL
+    };
+    let f = DynamicLdlt::<M>::from_matrix_with(&a, &perm, kind)
+        .map_err(|e| TestCaseError::fail(e.to_string()))?;
     // dense is in the original order; permute it into the factor's order
     let mut dense_p = DMatrix::from_fn(n, n, |i, j| dense[(perm[i], perm[j])]);
     prop_assert!(
@@ -299,4 +307,68 @@ fn rank_three_update_and_downdate_match_dense() {
     assert!(close(&to_c(&f.to_dense()), &want, 1e-12));
     f.rank_k_with(&[&w0, &w1, &w2], -1.0, |_, _| {}).unwrap();
     assert!(close(&to_c(&f.to_dense()), &dense, 1e-12));
+}
+
+/// A dense-ish start (every pair within `band` coupled), so that columns
+/// hold long runs of consecutive rows and the vectorised kernels run.
+fn banded(n: usize, band: usize) -> (UpperCsc<f64>, DMatrix<c64>) {
+    let seed: Vec<_> = (0..n)
+        .flat_map(|i| (i + 1..(i + band).min(n)).map(move |j| (i, j, 0.3 / (1 + j - i) as f64, 0.0)))
+        .collect();
+    start::<f64>(n, &seed)
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 48, ..ProptestConfig::default() })]
+
+    /// Multiple-rank updates, then the same downdates, on factors with long
+    /// runs, from both kinds of fresh factor: `L D Lᴴ` tracks `A`.
+    #[test]
+    fn rank_k_updates_on_long_runs_match_dense(
+        n in 8usize..48,
+        band in 2usize..24,
+        supernodal in any::<bool>(),
+        updates in prop::collection::vec(
+            prop::collection::vec(prop::collection::vec((0usize..48, -1.0..1.0f64), 1..14), 1..=MAX_RANK),
+            1..6,
+        ),
+    ) {
+        let (a, dense) = banded(n, band);
+        let kind = if supernodal { SupernodalThreshold::FORCE_SUPERNODAL } else { SupernodalThreshold::FORCE_SIMPLICIAL };
+        let identity: Vec<usize> = (0..n).collect();
+        let mut f = DynamicLdlt::<f64>::from_matrix_with(&a, &identity, kind).unwrap();
+        prop_assert!(close(&to_c(&f.to_dense()), &dense, 1e-12), "fresh factor differs");
+        let mut want = dense.clone();
+        let mut ws_all = Vec::new();
+        for vectors in updates {
+            let ws: Vec<Vec<(usize, f64)>> = vectors
+                .into_iter()
+                .map(|v| {
+                    let mut w: Vec<(usize, f64)> = Vec::new();
+                    for (i, x) in v {
+                        if !w.iter().any(|&(j, _)| j == i % n) {
+                            w.push((i % n, x));
+                        }
+                    }
+                    w
+                })
+                .collect();
+            let refs: Vec<&[(usize, f64)]> = ws.iter().map(|w| &w[..]).collect();
+            f.rank_k_with(&refs, 1.0, |_, _| {}).unwrap();
+            for w in &ws {
+                let mut v = DMatrix::<c64>::zeros(n, 1);
+                for &(i, x) in w {
+                    v[i] = c64::new(x, 0.0);
+                }
+                want += &v * v.transpose();
+            }
+            prop_assert!(close(&to_c(&f.to_dense()), &want, 1e-10), "update drifted");
+            ws_all.push(ws);
+        }
+        for ws in ws_all.iter().rev() {
+            let refs: Vec<&[(usize, f64)]> = ws.iter().map(|w| &w[..]).collect();
+            f.rank_k_with(&refs, -1.0, |_, _| {}).unwrap();
+        }
+        prop_assert!(close(&to_c(&f.to_dense()), &dense, 1e-9), "downdates did not undo the updates");
+    }
 }

@@ -21,6 +21,7 @@
 //! becomes 0 and the rest of the walk does nothing for it.
 
 use super::factor::DynamicLdlt;
+use super::runs::{dense_enough, extend_run_starts, for_each_run, rank_step, run_starts};
 use crate::sparse::Scalar;
 use std::fmt;
 
@@ -63,7 +64,7 @@ impl<T: Scalar> DynamicLdlt<T> {
         for (t, w) in ws.iter().enumerate() {
             for &(i, v) in w.iter() {
                 if v != T::default() {
-                    self.work[i * MAX_RANK + t] += v;
+                    self.work[t][i] += v;
                     carry.push(i as u32);
                 }
             }
@@ -124,7 +125,7 @@ impl<T: Scalar> DynamicLdlt<T> {
         let mut gammas = [T::default(); MAX_RANK];
         let mut live = 0;
         for (t, a) in alpha.iter_mut().enumerate().take(k) {
-            let p = std::mem::take(&mut self.work[j * MAX_RANK + t]);
+            let p = std::mem::take(&mut self.work[t][j]);
             if p == T::default() || *a == 0.0 {
                 continue;
             }
@@ -132,10 +133,12 @@ impl<T: Scalar> DynamicLdlt<T> {
             let dbar = d + *a * p.abs2();
             if dbar.is_nan() || dbar <= 0.0 || (sigma < 0.0 && dbar <= 1e-14 * d) {
                 // leave the accumulator clean before bailing out
-                for r in &self.cols[j].rows {
-                    self.work[*r as usize * MAX_RANK..][..MAX_RANK].fill(T::default());
+                for w in &mut self.work {
+                    for r in &self.cols[j].rows {
+                        w[*r as usize] = T::default();
+                    }
+                    w[j] = T::default();
                 }
-                self.work[j * MAX_RANK..][..MAX_RANK].fill(T::default());
                 return Err(UpdateError { column: j });
             }
             gammas[live] = p.conjugate().scale(*a / dbar);
@@ -151,27 +154,30 @@ impl<T: Scalar> DynamicLdlt<T> {
         }
         let col = &mut self.cols[j];
         let slots = &self.slots[..live];
-        if slots == [0, 1, 2] {
-            // an edge's three rows, the common case: unrolled
-            let ([p0, p1, p2, _], [g0, g1, g2, _]) = (ps, gammas);
-            for (&r, l) in col.rows.iter().zip(col.vals.iter_mut()) {
-                let w = &mut self.work[r as usize * MAX_RANK..][..3];
-                let w0 = w[0] - p0 * *l;
-                let l1 = *l + g0 * w0;
-                let w1 = w[1] - p1 * l1;
-                let l2 = l1 + g1 * w1;
-                let w2 = w[2] - p2 * l2;
-                *l = l2 + g2 * w2;
-                w.copy_from_slice(&[w0, w1, w2]);
-            }
+        let mut w: [&mut [T]; MAX_RANK] = Default::default();
+        let mut rest = &mut self.work[..];
+        let mut taken = 0;
+        // the live slots are increasing: split them off in turn
+        for (i, &t) in slots.iter().enumerate() {
+            let (head, tail) = std::mem::take(&mut rest).split_at_mut(t as usize - taken + 1);
+            w[i] = &mut head[t as usize - taken];
+            rest = tail;
+            taken = t as usize + 1;
+        }
+        let w = &mut w[..live];
+        if dense_enough(&col.rows, &col.starts) {
+            for_each_run(&col.rows, &col.starts, |first, at| {
+                rank_step(w, first, &mut col.vals[at], &ps[..live], &gammas[..live]);
+            });
             return Ok(());
         }
+        // short runs: one pass over the rows, every vector per row
         for (&r, l) in col.rows.iter().zip(col.vals.iter_mut()) {
-            let w = &mut self.work[r as usize * MAX_RANK..][..MAX_RANK];
+            let r = r as usize;
             let mut lv = *l;
-            for (i, &t) in slots.iter().enumerate() {
-                let wi = w[t as usize] - ps[i] * lv;
-                w[t as usize] = wi;
+            for (i, w) in w.iter_mut().enumerate() {
+                let wi = w[r] - ps[i] * lv;
+                w[r] = wi;
                 lv += gammas[i] * wi;
             }
             *l = lv;
@@ -209,9 +215,11 @@ impl<T: Scalar> DynamicLdlt<T> {
         // the common case: the new rows are the newest variables, past the end
         let tail = extra.partition_point(|&r| last.is_some_and(|l| r <= l));
         if is_subset(&extra[..tail], &col.rows) {
+            let old = col.rows.len();
             col.rows.extend_from_slice(&extra[tail..]);
             col.vals.resize(col.rows.len(), T::default());
             added.extend_from_slice(&extra[tail..]);
+            extend_run_starts(&col.rows, old, &mut col.starts);
             return;
         }
         let (rows, vals) = (&mut self.scratch_rows, &mut self.scratch_vals);
@@ -236,6 +244,7 @@ impl<T: Scalar> DynamicLdlt<T> {
         }
         std::mem::swap(&mut col.rows, rows);
         std::mem::swap(&mut col.vals, vals);
+        run_starts(&col.rows, &mut col.starts);
     }
 }
 
