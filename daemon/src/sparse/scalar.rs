@@ -38,7 +38,7 @@ pub trait Scalar:
     fn scale(self, r: f64) -> Self;
     /// Three steps of a multiple-rank update over a run of rows (see
     /// `sparse::dynamic::runs`); reals take a vectorised path when the CPU
-    /// has one.
+    /// has one and the run is 8 rows or longer.
     #[inline]
     fn rank3_run(w: [&mut [Self]; 3], l: &mut [Self], p: &[Self], g: &[Self]) {
         crate::sparse::dynamic::runs::rank3_run_generic(w, l, p, g)

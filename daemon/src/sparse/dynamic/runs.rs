@@ -59,11 +59,7 @@ pub(crate) fn rank_step<T: Scalar>(w: &mut [&mut [T]], first: usize, l: &mut [T]
                     &mut w1[rows.clone()],
                     &mut w2[rows.clone()],
                 ];
-                if l.len() < 8 {
-                    rank3_run_generic(w3, l, &p[t..t + 3], &g[t..t + 3]);
-                } else {
-                    T::rank3_run(w3, l, &p[t..t + 3], &g[t..t + 3]);
-                }
+                T::rank3_run(w3, l, &p[t..t + 3], &g[t..t + 3]);
             }
             [w0, w1] => {
                 rank1_run(&mut w0[rows.clone()], l, p[t], g[t]);
