@@ -48,22 +48,46 @@ impl State {
     pub fn new(config: &EngineConfig) -> Self {
         let source = config.snapshot;
         let linear = config.linear_stages || source == SnapshotSource::Linear;
-        Self {
-            outliers: config.outliers,
-            model: Model::default(),
-            source,
-            gn: (source == SnapshotSource::GaussNewton).then(|| GaussNewton::new(Pose2::IDENTITY)),
-            linear: linear.then(LinearStages::new),
-            offset: Vec::new(),
-            estimate: Vec::new(),
-            edge_chi2: Vec::new(),
+        let gn = (source == SnapshotSource::GaussNewton).then(|| GaussNewton::new(Pose2::IDENTITY));
+        Self::assemble(
+            config,
+            Model::default(),
+            gn,
+            linear.then(LinearStages::new),
+            Vec::new(),
+            Vec::new(),
+        )
+    }
+
+    /// A state over `model` with these solvers, offsets and estimate; the
+    /// bookkeeping starts fresh and the cached χ² is computed.
+    fn assemble(
+        config: &EngineConfig,
+        model: Model,
+        gn: Option<GaussNewton>,
+        linear: Option<LinearStages>,
+        offset: Vec<Pose2>,
+        estimate: Vec<Pose2>,
+    ) -> Self {
+        let edges = model.graph.edges().len();
+        let mut state = Self {
+            stamp: vec![0; edges],
+            model,
+            source: config.snapshot,
+            gn,
+            linear,
+            offset,
+            estimate,
+            edge_chi2: vec![0.0; edges],
             chi2: 0.0,
-            stamp: Vec::new(),
             epoch: 0,
+            outliers: config.outliers,
             deferred: Deferred::new(config.defer_budget),
             drift: DriftRun::default(),
             drifted: false,
-        }
+        };
+        state.recompute_chi2();
+        state
     }
 
     /// Applies one change as a replay does: a new keyframe first solves
@@ -562,25 +586,7 @@ impl State {
             Some(g) => g.estimate().to_vec(),
             None => lin,
         };
-        let edges = model.graph.edges().len();
-        let mut state = State {
-            stamp: vec![0; edges],
-            model,
-            source,
-            gn,
-            linear,
-            offset,
-            estimate,
-            edge_chi2: vec![0.0; edges],
-            chi2: 0.0,
-            epoch: 0,
-            outliers: config.outliers,
-            deferred: Deferred::new(config.defer_budget),
-            drift: DriftRun::default(),
-            drifted: false,
-        };
-        state.recompute_chi2();
-        Ok(state)
+        Ok(State::assemble(config, model, gn, linear, offset, estimate))
     }
 
     /// A copy of the model, for a rebuild elsewhere.
