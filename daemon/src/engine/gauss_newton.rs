@@ -4,15 +4,21 @@
 //! Between re-solves every edge is linearised at `lin`, the poses of the
 //! last polish (a new keyframe: where its first edge puts it). The system
 //! `H δ = −g` with `H = Σ s Jᵀ Ω J`, `g = Σ s Jᵀ Ω e` then grows by a rank-3
-//! update per edge (`Ω = L Lᵀ`, one update per row of `Lᵀ J`), and the
-//! estimate is `lin + δ`: one Gauss–Newton step from the polished map over
-//! everything seen since. A re-solve relinearises by building a new one.
+//! update per edge, and the estimate is `lin + δ`: one Gauss–Newton step
+//! from the polished map over everything seen since. A re-solve
+//! relinearises by building a new one.
+//!
+//! The factor is of the augmented matrix `[H −g; −gᵀ χ²(lin)]`
+//! ([`AugmentedCholesky`]): with `Ω = L Lᵀ`, an edge is the three vectors
+//! `[Lᵀ J | −Lᵀ e]` (rows of `Lᵀ`), so its update carries its gradient and
+//! cost, the forward solve rides along the update's walk, and the last
+//! pivot is the χ² the linear model predicts.
 
 use crate::geometry::Pose2;
 use crate::graph::{Edge, PoseGraph};
 use crate::nonlinear::structure::{jacobian, HessianStructure, NONE};
 use crate::nonlinear::{PositionPrior, Problem};
-use crate::sparse::dynamic::{DynamicLdlt, IncrementalCholesky, UpdateError};
+use crate::sparse::dynamic::{AugmentedCholesky, DynamicLdlt, UpdateError};
 use crate::sparse::FactorError;
 
 /// The linearised system and the estimate it gives.
@@ -22,11 +28,9 @@ pub struct GaussNewton {
     column: Vec<u32>,
     /// The keyframe owning each column.
     keyframe_of: Vec<u32>,
-    chol: IncrementalCholesky<f64, f64>,
+    chol: AugmentedCholesky<f64>,
     lin: Vec<Pose2>,
     estimate: Vec<Pose2>,
-    /// `Σ s eᵀ Ω e` at `lin`: the cost the linear model starts from.
-    lin_chi2: f64,
     changed: Vec<usize>,
     stamp: Vec<u32>,
     epoch: u32,
@@ -38,10 +42,9 @@ impl GaussNewton {
         Self {
             column: vec![NONE],
             keyframe_of: Vec::new(),
-            chol: IncrementalCholesky::empty(),
+            chol: AugmentedCholesky::empty(),
             lin: vec![gauge],
             estimate: vec![gauge],
-            lin_chi2: 0.0,
             changed: Vec::new(),
             stamp: vec![0],
             epoch: 0,
@@ -77,20 +80,20 @@ impl GaussNewton {
         structure.assemble(&scaled, None, priors, &lin, &mut h, &mut g);
         let identity: Vec<usize> = (0..h.n()).collect();
         let factor = DynamicLdlt::from_matrix(&h, &identity)?;
-        let chol = IncrementalCholesky::new(factor, g.iter().map(|v| -v).collect());
+        let b: Vec<f64> = g.iter().map(|v| -v).collect();
+        let lin_chi2 = Problem::new(&scaled, priors).chi2(&lin);
+        let chol = AugmentedCholesky::new(factor, &b, lin_chi2);
         let column = block_of
             .iter()
             .map(|&b| if b == NONE { NONE } else { 3 * b })
             .collect();
         let keyframe_of = order.iter().flat_map(|&k| [k as u32; 3]).collect();
-        let lin_chi2 = Problem::new(&scaled, priors).chi2(&lin);
         let mut gn = Self {
             column,
             keyframe_of,
             chol,
             estimate: lin.clone(),
             lin,
-            lin_chi2,
             changed: Vec::new(),
             stamp: vec![0; n],
             epoch: 0,
@@ -125,26 +128,14 @@ impl GaussNewton {
     /// Adds `delta` times the edge's terms, linearised at `lin`.
     pub fn apply_edge(&mut self, edge: &Edge, delta: f64) -> Result<(), UpdateError> {
         let (j, e) = jacobian(edge, &self.lin[edge.from], &self.lin[edge.to]);
-        let omega = edge.information.matrix();
-        self.lin_chi2 += delta * (e.transpose() * omega * e)[0];
-        // b = −g: −Δ Jᵀ Ω e
-        let g = (omega * j).transpose() * e;
         let cols: [Option<usize>; 6] = std::array::from_fn(|a| {
             let k = if a < 3 { edge.from } else { edge.to };
             let c = self.column[k];
             (c != NONE).then(|| c as usize + a % 3)
         });
-        for (a, c) in cols.iter().enumerate() {
-            if let Some(c) = c {
-                self.chol.add_rhs(*c, -delta * g[a]);
-            }
-        }
-        // Ω = L Lᵀ, so Jᵀ Ω J = Σ_r (Lᵀ J)_rᵀ (Lᵀ J)_r
-        let l = omega
-            .cholesky()
-            .map(|c| c.l())
-            .unwrap_or_else(|| omega.map(|v| v.max(0.0).sqrt()));
-        let rows = l.transpose() * j;
+        // Ω = L Lᵀ, so [Jᵀ; −eᵀ] Ω [J −e] = Σ_r [Lᵀ J | −Lᵀ e]_rᵀ [Lᵀ J | −Lᵀ e]_r
+        let lt = sqrt_information(&edge.information.matrix()).transpose();
+        let (rows, tails) = (lt * j, -(lt * e));
         let root = delta.abs().sqrt();
         let w: [Vec<(usize, f64)>; 3] = std::array::from_fn(|r| {
             cols.iter()
@@ -152,7 +143,9 @@ impl GaussNewton {
                 .filter_map(|(a, c)| c.map(|c| (c, rows[(r, a)] * root)))
                 .collect()
         });
-        self.chol.rank_k(&[&w[0], &w[1], &w[2]], delta.signum())
+        let tails = tails.map(|t| t * root);
+        self.chol
+            .rank_k(&[&w[0], &w[1], &w[2]], tails.as_slice(), delta.signum())
     }
 
     /// Adds a position prior linearised at `lin`: error `e = p_k − target`,
@@ -162,23 +155,18 @@ impl GaussNewton {
         let p = self.lin[prior.keyframe].position() - prior.target;
         let e = nalgebra::Vector2::new(p.re, p.im);
         let omega = prior.information;
-        self.lin_chi2 += (e.transpose() * omega * e)[0];
         let c = self.column[prior.keyframe];
         if c == NONE {
+            self.chol.add_cost((e.transpose() * omega * e)[0]);
             return Ok(());
         }
         let c = c as usize;
-        let g = omega * e;
-        self.chol.add_rhs(c, -g[0]);
-        self.chol.add_rhs(c + 1, -g[1]);
-        let Some(chol) = omega.cholesky() else {
-            return Ok(());
-        };
-        let l = chol.l();
-        // Ω = L Lᵀ: rows of Lᵀ
-        let w0 = [(c, l[(0, 0)]), (c + 1, l[(1, 0)])];
-        let w1 = [(c + 1, l[(1, 1)])];
-        self.chol.rank_k(&[&w0, &w1], 1.0)
+        // Ω = L Lᵀ: rows of Lᵀ, tails −Lᵀ e
+        let lt = sqrt_information(&omega).transpose();
+        let tails = -(lt * e);
+        let w0 = [(c, lt[(0, 0)]), (c + 1, lt[(0, 1)])];
+        let w1 = [(c, lt[(1, 0)]), (c + 1, lt[(1, 1)])];
+        self.chol.rank_k(&[&w0, &w1], tails.as_slice(), 1.0)
     }
 
     /// Solves for δ; columns whose change stays within `threshold` do not
@@ -211,11 +199,11 @@ impl GaussNewton {
     }
 
     /// The χ² the linear model predicts at its solution:
-    /// `χ²(lin) + 2gᵀδ + δᵀHδ = χ²(lin) − bᵀδ` (with `Hδ = b = −g`). Far
-    /// below the true χ² of the estimate means the linearisation failed.
+    /// `χ²(lin) + 2gᵀδ + δᵀHδ = χ²(lin) − gᵀH⁻¹g`, the augmented factor's
+    /// last pivot. Far below the true χ² of the estimate means the
+    /// linearisation failed.
     pub fn predicted_chi2(&self) -> f64 {
-        let bx: f64 = self.chol.b().iter().zip(self.chol.x()).map(|(b, x)| b * x).sum();
-        self.lin_chi2 - bx
+        self.chol.residual()
     }
 
     /// The current estimate of every keyframe slot.
@@ -232,4 +220,17 @@ impl GaussNewton {
     pub fn factor_nnz(&self) -> usize {
         self.chol.factor().nnz()
     }
+}
+
+/// A square root `L` of an information matrix, `Ω = L Lᵀ` (Cholesky; the
+/// square roots of the diagonal for one that is not positive definite,
+/// which the graph refuses at its door).
+fn sqrt_information<const N: usize>(omega: &nalgebra::SMatrix<f64, N, N>) -> nalgebra::SMatrix<f64, N, N>
+where
+    nalgebra::Const<N>: nalgebra::DimMin<nalgebra::Const<N>, Output = nalgebra::Const<N>>,
+{
+    omega
+        .cholesky()
+        .map(|c| c.l())
+        .unwrap_or_else(|| nalgebra::SMatrix::from_diagonal(&omega.diagonal().map(|v| v.max(0.0).sqrt())))
 }

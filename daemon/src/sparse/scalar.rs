@@ -73,9 +73,12 @@ impl Scalar for f64 {
     #[inline]
     fn rank3_run(w: [&mut [Self]; 3], l: &mut [Self], p: &[Self], g: &[Self]) {
         #[cfg(target_arch = "x86_64")]
-        if l.len() >= 8 && std::arch::is_x86_feature_detected!("avx2") {
-            // SAFETY: the CPU has AVX2
-            return unsafe { crate::sparse::dynamic::runs::rank3_run_avx2(w, l, p, g) };
+        if l.len() >= 8
+            && std::arch::is_x86_feature_detected!("avx2")
+            && std::arch::is_x86_feature_detected!("fma")
+        {
+            // SAFETY: the CPU has AVX2 and FMA
+            return unsafe { crate::sparse::dynamic::runs::rank3_run_fma(w, l, p, g) };
         }
         crate::sparse::dynamic::runs::rank3_run_generic(w, l, p, g)
     }

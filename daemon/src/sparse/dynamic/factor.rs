@@ -45,6 +45,33 @@ pub struct DynamicLdlt<T> {
     pub(crate) added: Vec<u32>,
     /// Which vector each live pivot of a column belongs to.
     pub(crate) slots: [u8; super::update::MAX_RANK],
+    /// What the update walks have cost so far.
+    pub(crate) walked: WalkStats,
+    /// With a right-hand side, the last row and pivot of the factor of
+    /// the augmented matrix (see [`DynamicLdlt::augment`]).
+    pub(crate) augmented: Option<Augmented<T>>,
+}
+
+/// The last row of the factor of `[A b; bᴴ β]` = `[L 0; zᴴ 1]
+/// diag(D, δ) [Lᴴ z; 0 1]`.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct Augmented<T> {
+    /// `z = D⁻¹ L⁻¹ b`.
+    pub(crate) z: Vec<T>,
+    /// `δ = β − bᴴ A⁻¹ b`.
+    pub(crate) pivot: f64,
+}
+
+/// Work counters of the update walks: columns stepped and the stored
+/// entries of `L` they swept (a column's rows, once per walk).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct WalkStats {
+    /// Walks (calls of a rank-k update).
+    pub walks: u64,
+    /// Columns stepped.
+    pub columns: u64,
+    /// Entries of `L` swept.
+    pub entries: u64,
 }
 
 impl<T: Scalar> DynamicLdlt<T> {
@@ -60,6 +87,8 @@ impl<T: Scalar> DynamicLdlt<T> {
             carry: Vec::new(),
             added: Vec::new(),
             slots: [0; super::update::MAX_RANK],
+            walked: WalkStats::default(),
+            augmented: None,
         }
     }
 
@@ -163,6 +192,9 @@ impl<T: Scalar> DynamicLdlt<T> {
     /// Adds a variable as the last column, uncoupled, with `D = 0` until an
     /// update gives it weight. Returns its column.
     pub fn append(&mut self) -> usize {
+        if let Some(a) = &mut self.augmented {
+            a.z.push(T::default());
+        }
         self.cols.push(Column::default());
         self.d.push(0.0);
         self.children.push(Vec::new());
@@ -173,6 +205,67 @@ impl<T: Scalar> DynamicLdlt<T> {
     /// Number of variables.
     pub fn len(&self) -> usize {
         self.cols.len()
+    }
+
+    /// Augments the factor with a right-hand side: it becomes the factor of
+    /// `[A b; bᴴ β]`, whose last row `z = D⁻¹ L⁻¹ b` (a forward solve) and
+    /// last pivot `δ = β − bᴴ A⁻¹ b` every later update keeps current, so
+    /// that `x = A⁻¹ b = L⁻ᴴ z` needs only a back-substitution. A variable
+    /// with a zero pivot gets `z = 0`.
+    pub fn augment(&mut self, b: &[T], beta: f64) {
+        assert_eq!(b.len(), self.len(), "one right-hand side entry per variable");
+        let mut y = b.to_vec();
+        let mut delta = beta;
+        for j in 0..self.len() {
+            let yj = y[j];
+            let col = &self.cols[j];
+            for (&r, &l) in col.rows.iter().zip(&col.vals) {
+                y[r as usize] -= l * yj;
+            }
+            let d = self.d[j];
+            y[j] = if d > 0.0 {
+                delta -= yj.abs2() / d;
+                yj.scale(1.0 / d)
+            } else {
+                T::default()
+            };
+        }
+        self.augmented = Some(Augmented { z: y, pivot: delta });
+    }
+
+    /// `z = D⁻¹ L⁻¹ b`, the augmented row (empty before [`Self::augment`]).
+    pub fn augmented_row(&self) -> &[T] {
+        self.augmented.as_ref().map_or(&[], |a| &a.z)
+    }
+
+    /// `δ = β − bᴴ A⁻¹ b`, the augmented factor's last pivot: for least
+    /// squares with `A = JᴴJ`, `b = −Jᴴr` and `β = rᴴr`, the cost the
+    /// linear model predicts at its solution (0 before [`Self::augment`]).
+    pub fn augmented_pivot(&self) -> f64 {
+        self.augmented.as_ref().map_or(0.0, |a| a.pivot)
+    }
+
+    /// `β ← β + v`: a change of the cost alone, which moves `δ` by `v`.
+    pub fn add_to_augmented_pivot(&mut self, v: f64) {
+        if let Some(a) = &mut self.augmented {
+            a.pivot += v;
+        }
+    }
+
+    /// Asks the CPU to fetch the start of column `k` into cache: a walk
+    /// touches each column of its path once, each in its own allocation,
+    /// and waiting for those first lines cost more than sweeping them.
+    #[inline]
+    pub(crate) fn prefetch_column(&self, k: usize) {
+        let c = &self.cols[k];
+        prefetch(c.rows.as_ptr());
+        prefetch(c.starts.as_ptr());
+        prefetch(c.vals.as_ptr());
+    }
+
+    /// What the update walks on this factor have cost so far.
+    pub fn walk_stats(&self) -> WalkStats {
+        self.walked
     }
 
     /// True with no variables.
@@ -267,4 +360,16 @@ impl<T: Scalar> DynamicLdlt<T> {
             })
             .collect()
     }
+}
+
+/// A hint to bring the cache line at `p` in (no effect off x86-64).
+#[inline(always)]
+fn prefetch<P>(p: *const P) {
+    #[cfg(target_arch = "x86_64")]
+    // SAFETY: a prefetch is a hint; it never faults, whatever the address.
+    unsafe {
+        std::arch::x86_64::_mm_prefetch(p.cast::<i8>(), std::arch::x86_64::_MM_HINT_T0);
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = p;
 }

@@ -8,7 +8,11 @@
 //!   Hager's row modification, touching only the elimination-tree path of
 //!   `w` and growing the pattern along it;
 //! - [`IncrementalCholesky`] keeps `x = A⁻¹ b` current after such changes,
-//!   re-solving only the affected paths and subtrees.
+//!   re-solving only the affected paths and subtrees;
+//! - [`AugmentedCholesky`] does the same on the factor of `[A b; bᴴ β]`,
+//!   where the updates carry the right-hand side and the forward solve rides
+//!   along their walks (the Gauss–Newton system, whose `b` changes only with
+//!   its updates).
 //!
 //! Columns are stored one per `Vec` (rows sorted, strictly below the
 //! diagonal), so that fill can grow any column, with where their runs of
@@ -17,12 +21,14 @@
 //! unit lower triangular and `D` real positive. A fresh factor comes from
 //! faer's LDLᴴ, simplicial or supernodal ([`DynamicLdlt::from_matrix`]).
 
+mod augmented;
 mod factor;
 pub(crate) mod runs;
 mod solve;
 mod update;
 
-pub use factor::DynamicLdlt;
+pub use augmented::AugmentedCholesky;
+pub use factor::{DynamicLdlt, WalkStats};
 pub use solve::IncrementalCholesky;
 pub use update::{UpdateError, MAX_RANK};
 

@@ -19,6 +19,12 @@
 //! A zero pivot (a variable with no weight yet, as a keyframe has between
 //! its appending and its first edge) takes a whole vector: its `α_t`
 //! becomes 0 and the rest of the walk does nothing for it.
+//!
+//! On an augmented factor (`[A b; bᴴ β]`, see `DynamicLdlt::augment`) the
+//! vectors carry one more entry, their *tail*, in the augmented row, which
+//! is a row of every column and whose pivot is the walk's last column: the
+//! forward solve `z = D⁻¹ L⁻¹ b` is updated on the walk's path, where it
+//! changes, at the cost of one row per column.
 
 use super::factor::DynamicLdlt;
 use super::runs::{dense_enough, extend_run_starts, for_each_run, rank_step, run_starts};
@@ -55,10 +61,31 @@ impl<T: Scalar> DynamicLdlt<T> {
         &mut self,
         ws: &[&[(usize, T)]],
         sigma: f64,
+        before: impl FnMut(usize, &Self),
+    ) -> Result<(), UpdateError> {
+        self.rank_k_augmented(ws, &[], sigma, before)
+    }
+
+    /// [`Self::rank_k_with`] on an augmented factor (see
+    /// [`DynamicLdlt::augment`]): vector `t` has `tails[t]` as its last
+    /// entry (missing tails are 0), so that `b` grows by `σ Σ_t w_t
+    /// conj(tail_t)` and `β` by `σ Σ_t |tail_t|²`. The augmented row rides
+    /// along the walk as one more row of every column; the walk ends at its
+    /// pivot. Without augmentation the tails are ignored.
+    pub fn rank_k_augmented(
+        &mut self,
+        ws: &[&[(usize, T)]],
+        tails: &[T],
+        sigma: f64,
         mut before: impl FnMut(usize, &Self),
     ) -> Result<(), UpdateError> {
         let k = ws.len();
         assert!(k <= MAX_RANK, "rank {k} above {MAX_RANK}");
+        assert!(tails.len() <= k, "more tails than vectors");
+        let mut tail = [T::default(); MAX_RANK];
+        if self.augmented.is_some() {
+            tail[..tails.len()].copy_from_slice(tails);
+        }
         let mut carry = std::mem::take(&mut self.carry);
         carry.clear();
         for (t, w) in ws.iter().enumerate() {
@@ -73,6 +100,7 @@ impl<T: Scalar> DynamicLdlt<T> {
         carry.dedup();
         let mut alpha = [sigma; MAX_RANK];
         let mut result = Ok(());
+        self.walked.walks += 1;
         let mut next = carry.first().map(|&j| j as usize);
         // rows the previous column gained in this walk: by the nesting of
         // patterns, the only ones its parent can be missing
@@ -95,7 +123,12 @@ impl<T: Scalar> DynamicLdlt<T> {
             if new_parent != old_parent {
                 self.reparent(j, old_parent);
             }
-            if let Err(e) = self.eliminate(j, k, &mut alpha, sigma) {
+            self.walked.columns += 1;
+            self.walked.entries += self.cols[j].rows.len() as u64;
+            if let Some(p) = new_parent {
+                self.prefetch_column(p);
+            }
+            if let Err(e) = self.eliminate(j, k, &mut alpha, &mut tail, sigma) {
                 result = Err(e);
                 break;
             }
@@ -106,6 +139,12 @@ impl<T: Scalar> DynamicLdlt<T> {
                 carry.extend_from_slice(&self.cols[j].rows);
             }
             next = new_parent;
+        }
+        if let (Some(a), Ok(())) = (&mut self.augmented, &result) {
+            // the augmented pivot is the last column of every walk
+            for (t, a_t) in alpha.iter().enumerate().take(k) {
+                a.pivot += a_t * tail[t].abs2();
+            }
         }
         self.carry = carry;
         self.added = added;
@@ -119,6 +158,7 @@ impl<T: Scalar> DynamicLdlt<T> {
         j: usize,
         k: usize,
         alpha: &mut [f64; MAX_RANK],
+        tail: &mut [T; MAX_RANK],
         sigma: f64,
     ) -> Result<(), UpdateError> {
         let mut ps = [T::default(); MAX_RANK];
@@ -151,6 +191,17 @@ impl<T: Scalar> DynamicLdlt<T> {
         }
         if live == 0 {
             return Ok(());
+        }
+        if let Some(a) = &mut self.augmented {
+            // the augmented row: one more row of column j
+            let mut z = a.z[j];
+            for i in 0..live {
+                let t = self.slots[i] as usize;
+                let wi = tail[t] - ps[i] * z;
+                tail[t] = wi;
+                z += gammas[i] * wi;
+            }
+            a.z[j] = z;
         }
         let col = &mut self.cols[j];
         let slots = &self.slots[..live];
