@@ -27,6 +27,9 @@ struct Run {
     walks: u64,
     columns: u64,
     entries: u64,
+    touched: u64,
+    visited: u64,
+    read: u64,
 }
 
 fn main() {
@@ -45,8 +48,8 @@ fn main() {
     let graph = slamd_tests::read(name);
     let groups = graph.by_newer();
     println!("{name}: fresh factor at n0 keyframes, then {append} keyframes streamed (min of {runs} runs)\n");
-    println!("| n0 | update ms | solve ms | per keyframe µs | nnz(L) fresh → after | walks | columns per walk | entries per column |");
-    println!("|---|---|---|---|---|---|---|---|");
+    println!("| n0 | update ms | solve ms | per keyframe µs | nnz(L) fresh → after | walks | columns per walk | entries per column | solve: touched / visited columns | entries read |");
+    println!("|---|---|---|---|---|---|---|---|---|---|");
     let n = graph.len();
     for n0 in [n * 3 / 10, n * 6 / 10, n * 9 / 10] {
         let n1 = (n0 + append).min(n);
@@ -61,7 +64,7 @@ fn main() {
             .min_by(|a, b| (a.update_s + a.solve_s).total_cmp(&(b.update_s + b.solve_s)))
             .expect("one run");
         println!(
-            "| {n0} | {:.1} | {:.1} | {:.0} | {} → {} | {} | {:.0} | {:.0} |",
+            "| {n0} | {:.1} | {:.1} | {:.0} | {} → {} | {} | {:.0} | {:.0} | {:.0} / {:.0} | {:.0} |",
             1e3 * best.update_s,
             1e3 * best.solve_s,
             1e6 * (best.update_s + best.solve_s) / (n1 - n0) as f64,
@@ -70,6 +73,9 @@ fn main() {
             best.walks,
             best.columns as f64 / best.walks.max(1) as f64,
             best.entries as f64 / best.columns.max(1) as f64,
+            best.touched as f64 / (n1 - n0) as f64,
+            best.visited as f64 / (n1 - n0) as f64,
+            best.read as f64 / (n1 - n0) as f64,
         );
     }
 }
@@ -92,6 +98,7 @@ fn stream(graph: &PoseGraph, groups: &[Vec<usize>], lin: &[Pose2], n0: usize, n1
     let mut gn = GaussNewton::build(&prefix, &edges, &[], lin.to_vec(), &order).expect("factorises");
     let nnz0 = gn.factor_nnz();
     let walked0 = gn.factor().walk_stats();
+    let solved0 = gn.solve_stats();
     let (mut update_s, mut solve_s) = (0.0, 0.0);
     for (k, group) in groups.iter().enumerate().take(n1).skip(n0) {
         let t = Instant::now();
@@ -111,13 +118,20 @@ fn stream(graph: &PoseGraph, groups: &[Vec<usize>], lin: &[Pose2], n0: usize, n1
             }
             gn.apply_edge(&edge, 1.0).expect("an update never fails");
         }
+        // the updates wait in a batch: apply them here, so that the
+        // update column times the walks and the solve column the solve
+        gn.flush().expect("updates never fail");
         let u = Instant::now();
-        gn.solve(THRESHOLD);
+        gn.solve(THRESHOLD).expect("updates never fail");
         solve_s += u.elapsed().as_secs_f64();
         update_s += (u - t).as_secs_f64();
     }
     let walked = gn.factor().walk_stats();
+    let solved = gn.solve_stats();
     Run {
+        touched: solved.touched - solved0.touched,
+        visited: solved.visited - solved0.visited,
+        read: solved.entries - solved0.entries,
         update_s,
         solve_s,
         nnz0,

@@ -13,12 +13,18 @@
 //! `[Lᵀ J | −Lᵀ e]` (rows of `Lᵀ`), so its update carries its gradient and
 //! cost, the forward solve rides along the update's walk, and the last
 //! pivot is the χ² the linear model predicts.
+//!
+//! Updates wait in a batch until the solve (or until the batch is full) and
+//! go in as one multiple-rank walk: a keyframe's odometry and loop closures
+//! climb their own paths of the elimination tree and sweep the part they
+//! share once. A downdate goes in at once, so that its failure surfaces
+//! where it is asked for.
 
 use crate::geometry::Pose2;
 use crate::graph::{Edge, PoseGraph};
 use crate::nonlinear::structure::{jacobian, HessianStructure, NONE};
 use crate::nonlinear::{PositionPrior, Problem};
-use crate::sparse::dynamic::{AugmentedCholesky, DynamicLdlt, UpdateError};
+use crate::sparse::dynamic::{AugmentedCholesky, DynamicLdlt, UpdateError, MAX_RANK};
 use crate::sparse::FactorError;
 
 /// The linearised system and the estimate it gives.
@@ -34,6 +40,8 @@ pub struct GaussNewton {
     changed: Vec<usize>,
     stamp: Vec<u32>,
     epoch: u32,
+    /// Update vectors (with their tails) waiting for one walk.
+    batch: Vec<(Vec<(usize, f64)>, f64)>,
 }
 
 impl GaussNewton {
@@ -48,6 +56,7 @@ impl GaussNewton {
             changed: Vec::new(),
             stamp: vec![0],
             epoch: 0,
+            batch: Vec::new(),
         }
     }
 
@@ -97,6 +106,7 @@ impl GaussNewton {
             changed: Vec::new(),
             stamp: vec![0; n],
             epoch: 0,
+            batch: Vec::new(),
         };
         for k in order {
             gn.refresh_estimate(*k);
@@ -125,7 +135,8 @@ impl GaussNewton {
         self.keyframe_of.extend([k as u32; 3]);
     }
 
-    /// Adds `delta` times the edge's terms, linearised at `lin`.
+    /// Adds `delta` times the edge's terms, linearised at `lin`. An update
+    /// (`delta > 0`) waits for the next solve; a downdate is applied now.
     pub fn apply_edge(&mut self, edge: &Edge, delta: f64) -> Result<(), UpdateError> {
         let (j, e) = jacobian(edge, &self.lin[edge.from], &self.lin[edge.to]);
         let cols: [Option<usize>; 6] = std::array::from_fn(|a| {
@@ -137,15 +148,15 @@ impl GaussNewton {
         let lt = sqrt_information(&edge.information.matrix()).transpose();
         let (rows, tails) = (lt * j, -(lt * e));
         let root = delta.abs().sqrt();
-        let w: [Vec<(usize, f64)>; 3] = std::array::from_fn(|r| {
-            cols.iter()
+        let vectors = (0..3).map(|r| {
+            let w = cols
+                .iter()
                 .enumerate()
                 .filter_map(|(a, c)| c.map(|c| (c, rows[(r, a)] * root)))
-                .collect()
+                .collect();
+            (w, tails[r] * root)
         });
-        let tails = tails.map(|t| t * root);
-        self.chol
-            .rank_k(&[&w[0], &w[1], &w[2]], tails.as_slice(), delta.signum())
+        self.apply(vectors, delta.signum())
     }
 
     /// Adds a position prior linearised at `lin`: error `e = p_k − target`,
@@ -164,14 +175,51 @@ impl GaussNewton {
         // Ω = L Lᵀ: rows of Lᵀ, tails −Lᵀ e
         let lt = sqrt_information(&omega).transpose();
         let tails = -(lt * e);
-        let w0 = [(c, lt[(0, 0)]), (c + 1, lt[(0, 1)])];
-        let w1 = [(c, lt[(1, 0)]), (c + 1, lt[(1, 1)])];
-        self.chol.rank_k(&[&w0, &w1], tails.as_slice(), 1.0)
+        let vectors = (0..2).map(|r| (vec![(c, lt[(r, 0)]), (c + 1, lt[(r, 1)])], tails[r]));
+        self.apply(vectors, 1.0)
     }
 
-    /// Solves for δ; columns whose change stays within `threshold` do not
-    /// pass it to their subtrees. Returns the keyframes whose estimate moved.
-    pub fn solve(&mut self, threshold: f64) -> &[usize] {
+    /// Batches update vectors (`sigma > 0`), or applies a downdate now
+    /// after the batch.
+    fn apply(
+        &mut self,
+        vectors: impl ExactSizeIterator<Item = (Vec<(usize, f64)>, f64)>,
+        sigma: f64,
+    ) -> Result<(), UpdateError> {
+        if sigma == 0.0 {
+            return Ok(());
+        }
+        if sigma < 0.0 || self.batch.len() + vectors.len() > MAX_RANK {
+            self.flush()?;
+        }
+        self.batch.extend(vectors);
+        if sigma < 0.0 {
+            return self.walk(-1.0);
+        }
+        Ok(())
+    }
+
+    /// Applies the waiting updates in one walk.
+    pub fn flush(&mut self) -> Result<(), UpdateError> {
+        if self.batch.is_empty() {
+            return Ok(());
+        }
+        self.walk(1.0)
+    }
+
+    fn walk(&mut self, sigma: f64) -> Result<(), UpdateError> {
+        let ws: Vec<&[(usize, f64)]> = self.batch.iter().map(|(w, _)| &w[..]).collect();
+        let tails: Vec<f64> = self.batch.iter().map(|&(_, t)| t).collect();
+        let result = self.chol.rank_k(&ws, &tails, sigma);
+        self.batch.clear();
+        result
+    }
+
+    /// Applies the waiting updates and solves for δ; columns whose change
+    /// stays within `threshold` do not pass it to their subtrees. Returns
+    /// the keyframes whose estimate moved.
+    pub fn solve(&mut self, threshold: f64) -> Result<&[usize], UpdateError> {
+        self.flush()?;
         self.epoch = self.epoch.wrapping_add(1);
         self.changed.clear();
         let changed_cols = self.chol.solve(threshold).to_vec();
@@ -185,7 +233,7 @@ impl GaussNewton {
         for i in 0..self.changed.len() {
             self.refresh_estimate(self.changed[i]);
         }
-        &self.changed
+        Ok(&self.changed)
     }
 
     fn refresh_estimate(&mut self, k: usize) {
@@ -214,6 +262,11 @@ impl GaussNewton {
     /// The factor.
     pub fn factor(&self) -> &crate::sparse::dynamic::DynamicLdlt<f64> {
         self.chol.factor()
+    }
+
+    /// What the incremental solves have cost so far.
+    pub fn solve_stats(&self) -> crate::sparse::dynamic::SolveStats {
+        self.chol.solve_stats()
     }
 
     /// Stored entries of the factor.

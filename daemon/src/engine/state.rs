@@ -385,7 +385,7 @@ impl State {
     /// cached χ² with it. Returns the number of keyframes that moved.
     pub fn solve(&mut self, threshold: f64) -> Result<usize, EngineError> {
         let connected = self.connect_pending().and(self.apply_fixes());
-        let mut moved = self.solve_factor(threshold);
+        let mut moved = self.solve_factor(threshold)?;
         connected?;
         // the estimate moved: waiting loop closures over budget enter, and
         // the solve that follows moves it again; each round takes one in
@@ -399,17 +399,17 @@ impl State {
             if !entered {
                 return Ok(moved);
             }
-            moved = moved.max(self.solve_factor(threshold));
+            moved = moved.max(self.solve_factor(threshold)?);
         }
     }
 
     /// Solves the source's factor and refreshes the estimate and its χ².
     /// Returns the number of keyframes that moved.
-    fn solve_factor(&mut self, threshold: f64) -> usize {
+    fn solve_factor(&mut self, threshold: f64) -> Result<usize, EngineError> {
         let changed = match self.source {
             SnapshotSource::GaussNewton => {
                 let gn = self.gn.as_mut().expect("Gauss–Newton source");
-                let changed = gn.solve(threshold).to_vec();
+                let changed = gn.solve(threshold).map_err(EngineError::Numeric)?.to_vec();
                 for &k in &changed {
                     self.estimate[k] = gn.estimate()[k];
                 }
@@ -437,7 +437,7 @@ impl State {
                 }
             }
         }
-        changed.len()
+        Ok(changed.len())
     }
 
     fn stamp_edge(&mut self, e: usize) -> bool {

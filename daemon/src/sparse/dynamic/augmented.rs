@@ -29,6 +29,21 @@ pub struct AugmentedCholesky<T> {
     touched_list: Vec<usize>,
     queued: Vec<bool>,
     changed: Vec<usize>,
+    solved: SolveStats,
+}
+
+/// Work counters of the incremental solves.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct SolveStats {
+    /// Solves.
+    pub solves: u64,
+    /// Columns the walks touched, back-substituted because they changed.
+    pub touched: u64,
+    /// Columns back-substituted in all (touched, and reached by the
+    /// wildfire below them).
+    pub visited: u64,
+    /// Entries of `L` those back-substitutions read.
+    pub entries: u64,
 }
 
 impl<T: Scalar> AugmentedCholesky<T> {
@@ -43,6 +58,7 @@ impl<T: Scalar> AugmentedCholesky<T> {
             touched_list: Vec::new(),
             queued: vec![false; n],
             changed: Vec::new(),
+            solved: SolveStats::default(),
         };
         s.solve_full();
         s
@@ -66,6 +82,11 @@ impl<T: Scalar> AugmentedCholesky<T> {
     /// Number of variables.
     pub fn len(&self) -> usize {
         self.x.len()
+    }
+
+    /// What the incremental solves have cost so far.
+    pub fn solve_stats(&self) -> SolveStats {
+        self.solved
     }
 
     /// True with no variables.
@@ -121,6 +142,8 @@ impl<T: Scalar> AugmentedCholesky<T> {
             }
             k += 1;
         }
+        self.solved.solves += 1;
+        self.solved.touched += self.touched_list.len() as u64;
         let mut heap: BinaryHeap<usize> = BinaryHeap::with_capacity(self.touched_list.len());
         for &j in &self.touched_list {
             self.touched[j] = false;
@@ -132,6 +155,8 @@ impl<T: Scalar> AugmentedCholesky<T> {
         let tau2 = threshold * threshold;
         while let Some(j) = heap.pop() {
             self.queued[j] = false;
+            self.solved.visited += 1;
+            self.solved.entries += self.factor.column(j).0.len() as u64;
             let new = self.back_substitute(j);
             let delta = (new - self.x[j]).abs2();
             if delta > 0.0 {

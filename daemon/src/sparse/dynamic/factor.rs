@@ -40,11 +40,14 @@ pub struct DynamicLdlt<T> {
     pub(crate) work: Vec<Vec<T>>,
     pub(crate) scratch_rows: Vec<u32>,
     pub(crate) scratch_vals: Vec<T>,
-    pub(crate) carry: Vec<u32>,
+    /// The rows the paths joining at a column bring to it.
+    pub(crate) extra: Vec<u32>,
     /// Rows the last column of an update walk gained.
     pub(crate) added: Vec<u32>,
     /// Which vector each live pivot of a column belongs to.
     pub(crate) slots: [u8; super::update::MAX_RANK],
+    /// The paths of the walk under way.
+    pub(crate) paths: super::update::Paths,
     /// What the update walks have cost so far.
     pub(crate) walked: WalkStats,
     /// With a right-hand side, the last row and pivot of the factor of
@@ -84,9 +87,10 @@ impl<T: Scalar> DynamicLdlt<T> {
             work: vec![Vec::new(); super::update::MAX_RANK],
             scratch_rows: Vec::new(),
             scratch_vals: Vec::new(),
-            carry: Vec::new(),
+            extra: Vec::new(),
             added: Vec::new(),
             slots: [0; super::update::MAX_RANK],
+            paths: super::update::Paths::default(),
             walked: WalkStats::default(),
             augmented: None,
         }

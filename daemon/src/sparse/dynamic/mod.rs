@@ -27,7 +27,7 @@ pub(crate) mod runs;
 mod solve;
 mod update;
 
-pub use augmented::AugmentedCholesky;
+pub use augmented::{AugmentedCholesky, SolveStats};
 pub use factor::{DynamicLdlt, WalkStats};
 pub use solve::IncrementalCholesky;
 pub use update::{UpdateError, MAX_RANK};

@@ -10,6 +10,9 @@
 
 use crate::sparse::Scalar;
 
+// the kernels below are written for at most this many vectors
+const _: () = assert!(super::update::MAX_RANK == 12);
+
 /// Where each run of consecutive rows starts in the sorted `rows`.
 pub(crate) fn run_starts(rows: &[u32], starts: &mut Vec<u32>) {
     starts.clear();
@@ -44,88 +47,68 @@ pub(crate) fn for_each_run(rows: &[u32], starts: &[u32], mut f: impl FnMut(usize
 }
 
 /// One column step of a multiple-rank update over a run of rows starting
-/// at `first`: for each vector `t` in turn and every element,
-/// `w_t ← w_t − p_t l`, then `l ← l + g_t w_t`. Takes the vectors three at
-/// a time, so that `l` is loaded and stored once per three.
+/// at `first`: for every element and each vector `t` in turn,
+/// `w_t ← w_t − p_t l`, then `l ← l + g_t w_t`. All vectors go in one pass,
+/// so that `l` is loaded and stored once however many there are.
 #[inline]
 pub(crate) fn rank_step<T: Scalar>(w: &mut [&mut [T]], first: usize, l: &mut [T], p: &[T], g: &[T]) {
-    let rows = first..first + l.len();
-    let mut t = 0;
-    while t < w.len() {
-        match &mut w[t..] {
-            [w0, w1, w2, ..] => {
-                let w3 = [
-                    &mut w0[rows.clone()],
-                    &mut w1[rows.clone()],
-                    &mut w2[rows.clone()],
-                ];
-                T::rank3_run(w3, l, &p[t..t + 3], &g[t..t + 3]);
-            }
-            [w0, w1] => {
-                rank1_run(&mut w0[rows.clone()], l, p[t], g[t]);
-                rank1_run(&mut w1[rows.clone()], l, p[t + 1], g[t + 1]);
-            }
-            [w0] => rank1_run(&mut w0[rows.clone()], l, p[t], g[t]),
-            [] => unreachable!(),
+    T::rank_run(w, first, l, p, g)
+}
+
+/// [`rank_step`] one row at a time.
+#[inline]
+pub(crate) fn rank_run_generic<T: Scalar>(w: &mut [&mut [T]], first: usize, l: &mut [T], p: &[T], g: &[T]) {
+    for (e, lv) in l.iter_mut().enumerate() {
+        let r = first + e;
+        let mut x = *lv;
+        for (t, w) in w.iter_mut().enumerate() {
+            let a = w[r] - p[t] * x;
+            x += g[t] * a;
+            w[r] = a;
         }
-        t += 3;
+        *lv = x;
     }
 }
 
+/// [`rank_step`] for exactly `K` vectors, with fused multiply-adds: the
+/// vectors unroll, and the loop over the rows vectorises.
 #[inline(always)]
-fn rank1_run<T: Scalar>(w: &mut [T], l: &mut [T], p: T, g: T) {
-    for (w, l) in w.iter_mut().zip(l.iter_mut()) {
-        let wi = *w - p * *l;
-        *w = wi;
-        *l += g * wi;
-    }
-}
-
-/// Three vectors of [`rank_step`] in one pass over `l`.
-#[inline(always)]
-pub(crate) fn rank3_run_generic<T: Scalar>(w: [&mut [T]; 3], l: &mut [T], p: &[T], g: &[T]) {
-    let [w0, w1, w2] = w;
-    let (p0, p1, p2, g0, g1, g2) = (p[0], p[1], p[2], g[0], g[1], g[2]);
+fn rank_run_fixed<const K: usize>(w: &mut [&mut [f64]], first: usize, l: &mut [f64], p: &[f64], g: &[f64]) {
     let n = l.len();
-    let (w0, w1, w2) = (&mut w0[..n], &mut w1[..n], &mut w2[..n]);
+    let Ok(ws) = w.get_disjoint_mut(std::array::from_fn::<usize, K, _>(|t| t)) else {
+        unreachable!("K = w.len() distinct vectors");
+    };
+    let ws: [&mut [f64]; K] = ws.map(|s| &mut s[first..first + n]);
+    let np: [f64; K] = std::array::from_fn(|t| -p[t]);
+    let g: [f64; K] = std::array::from_fn(|t| g[t]);
     for e in 0..n {
-        let lv = l[e];
-        let a = w0[e] - p0 * lv;
-        let lv = lv + g0 * a;
-        let b = w1[e] - p1 * lv;
-        let lv = lv + g1 * b;
-        let c = w2[e] - p2 * lv;
-        l[e] = lv + g2 * c;
-        w0[e] = a;
-        w1[e] = b;
-        w2[e] = c;
+        let mut x = l[e];
+        for t in 0..K {
+            let a = np[t].mul_add(x, ws[t][e]);
+            x = g[t].mul_add(a, x);
+            ws[t][e] = a;
+        }
+        l[e] = x;
     }
 }
 
-/// [`rank3_run_generic`] compiled for AVX2 with fused multiply-adds (four
-/// lanes; each step rounds once instead of twice).
+/// [`rank_step`] compiled for AVX2 with fused multiply-adds (four lanes;
+/// each step rounds once instead of twice), for up to `MAX_RANK` vectors.
 ///
 /// # Safety
 /// The CPU must have AVX2 and FMA.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
-pub(crate) unsafe fn rank3_run_fma(w: [&mut [f64]; 3], l: &mut [f64], p: &[f64], g: &[f64]) {
-    let [w0, w1, w2] = w;
-    let (p0, p1, p2, g0, g1, g2) = (-p[0], -p[1], -p[2], g[0], g[1], g[2]);
-    let n = l.len();
-    let (w0, w1, w2) = (&mut w0[..n], &mut w1[..n], &mut w2[..n]);
-    for e in 0..n {
-        let lv = l[e];
-        let a = p0.mul_add(lv, w0[e]);
-        let lv = g0.mul_add(a, lv);
-        let b = p1.mul_add(lv, w1[e]);
-        let lv = g1.mul_add(b, lv);
-        let c = p2.mul_add(lv, w2[e]);
-        l[e] = g2.mul_add(c, lv);
-        w0[e] = a;
-        w1[e] = b;
-        w2[e] = c;
+pub(crate) unsafe fn rank_run_fma(w: &mut [&mut [f64]], first: usize, l: &mut [f64], p: &[f64], g: &[f64]) {
+    macro_rules! fixed {
+        ($($k:literal)*) => {
+            match w.len() {
+                $($k => rank_run_fixed::<$k>(w, first, l, p, g),)*
+                _ => rank_run_generic(w, first, l, p, g),
+            }
+        };
     }
+    fixed!(1 2 3 4 5 6 7 8 9 10 11 12)
 }
 
 /// `c_r += y L_rj` over the rows of column `j`, by runs.

@@ -560,3 +560,36 @@ fn augmented_zero_pivots_absorb_whole_vectors() {
     assert!((chol.x()[1] + 1.0).abs() < 1e-12);
     assert!((chol.x()[k] - 2.25).abs() < 1e-12, "{}", chol.x()[k]);
 }
+
+#[test]
+fn vectors_on_separate_branches_walk_their_own_paths_and_join() {
+    // Elimination tree 0 → 1 → 4 → 5 and 2 → 3 → 4: one vector starts on
+    // each branch. Each climbs its own branch; they join at 4 and sweep
+    // 4 and 5 once: six columns stepped, no fill, the dense result.
+    let mut e = vec![];
+    for i in 0..6 {
+        e.push((i, i, 3.0));
+    }
+    for (i, j) in [(0, 1), (1, 4), (2, 3), (3, 4), (4, 5)] {
+        e.push((i, j, -1.0));
+    }
+    let a = UpperCsc::from_triplets(6, &e);
+    let mut f = DynamicLdlt::<f64>::from_matrix(&a, &(0..6).collect::<Vec<_>>()).unwrap();
+    let mut dense = to_c(&f.to_dense());
+    let nnz = f.nnz();
+    let w1 = [(0, 0.5), (1, 0.3)];
+    let w2 = [(2, 0.7), (3, -0.2)];
+    let mut touched = vec![];
+    f.rank_k_with(&[&w1, &w2], 1.0, |j, _| touched.push(j)).unwrap();
+    assert_eq!(touched, vec![0, 1, 2, 3, 4, 5]);
+    assert_eq!(f.walk_stats().columns, 6);
+    assert_eq!(f.nnz(), nnz, "separate paths add no fill");
+    for w in [&w1, &w2] {
+        let mut v = DMatrix::<c64>::zeros(6, 1);
+        for &(i, x) in w.iter() {
+            v[i] = c64::new(x, 0.0);
+        }
+        dense += &v * v.transpose();
+    }
+    assert!(close(&to_c(&f.to_dense()), &dense, 1e-12));
+}

@@ -1,4 +1,5 @@
-//! Rank-k update and downdate: `A ← A + σ Σ_t w_t w_tᴴ`, σ = ±1, k ≤ 4.
+//! Rank-k update and downdate: `A ← A + σ Σ_t w_t w_tᴴ`, σ = ±1, k ≤
+//! [`MAX_RANK`].
 //!
 //! Davis and Hager's method C1 on `L D Lᴴ`: walking the elimination-tree
 //! path from the first nonzero of the `w_t`, column `j` takes each vector in
@@ -9,12 +10,17 @@
 //! w_t[i] ← w_t[i] − p L_ij,   L_ij ← L_ij + γ w_t[i]    (i below j)
 //! ```
 //!
-//! Taking all vectors at each column (their multiple-rank form) walks the
-//! path once. The pattern of a column grows to every row where some `w_t`
-//! is nonzero, so the walk follows the path of the *new* tree; only columns
-//! on that path are touched. Each column's pattern nests in its parent's
-//! (the structure of a Cholesky factor), so once a column on the walk gains
-//! no rows, no column above it can: from there the walk just follows parents.
+//! Their multiple-rank form walks each vector's path from its own first
+//! nonzero (`Paths`); where paths reach the same column they join,
+//! and each column is stepped once, taking every vector that reaches it in
+//! one sweep of its rows. The pattern of a column grows to every row where a
+//! vector reaching it is nonzero, so a walk follows the path of the *new*
+//! tree; only columns on the paths are touched. Each column's pattern nests
+//! in its parent's (the structure of a Cholesky factor), so once a column on
+//! a path gains no rows, no column above it can: from there the path just
+//! follows parents. (Merging every vector's rows into the first column
+//! instead, as this walk once did, made one path of them all and filled in
+//! what separate paths never touch: 25-33% slower on City10000.)
 //!
 //! A zero pivot (a variable with no weight yet, as a keyframe has between
 //! its appending and its first edge) takes a whole vector: its `α_t`
@@ -32,7 +38,7 @@ use crate::sparse::Scalar;
 use std::fmt;
 
 /// Most vectors one call takes.
-pub const MAX_RANK: usize = 4;
+pub const MAX_RANK: usize = 12;
 
 /// A downdate that would leave the matrix not positive definite.
 #[derive(Clone, Debug, PartialEq)]
@@ -86,39 +92,47 @@ impl<T: Scalar> DynamicLdlt<T> {
         if self.augmented.is_some() {
             tail[..tails.len()].copy_from_slice(tails);
         }
-        let mut carry = std::mem::take(&mut self.carry);
-        carry.clear();
+        // each vector's path starts at its first nonzero, holding its other
+        // nonzero rows to merge there; vectors that start together walk as one
+        let mut paths = std::mem::take(&mut self.paths);
+        paths.clear();
         for (t, w) in ws.iter().enumerate() {
+            let Some(first) = w
+                .iter()
+                .filter(|&&(_, v)| v != T::default())
+                .map(|&(i, _)| i)
+                .min()
+            else {
+                continue;
+            };
+            let pending = paths.start(first);
             for &(i, v) in w.iter() {
                 if v != T::default() {
                     self.work[t][i] += v;
-                    carry.push(i as u32);
+                    if i != first {
+                        pending.push(i as u32);
+                    }
                 }
             }
         }
-        carry.sort_unstable();
-        carry.dedup();
         let mut alpha = [sigma; MAX_RANK];
         let mut result = Ok(());
         self.walked.walks += 1;
-        let mut next = carry.first().map(|&j| j as usize);
+        let mut extra = std::mem::take(&mut self.extra);
         // rows the previous column gained in this walk: by the nesting of
         // patterns, the only ones its parent can be missing
         let mut added = std::mem::take(&mut self.added);
-        added.clear();
-        let mut full_merge = true;
-        while let Some(j) = next {
+        while let Some(j) = paths.lowest() {
+            // the paths that reach column j join here, in the lowest slot
+            extra.clear();
+            let slot = paths.join_at(j, &mut extra);
+            extra.sort_unstable();
+            extra.dedup();
+            // rows of column j are below j
+            let from = extra.partition_point(|&r| r as usize <= j);
             before(j, self);
             let old_parent = self.parent(j);
-            if full_merge {
-                let extra = if carry.is_empty() { &[][..] } else { &carry[1..] };
-                self.merge_rows(j, extra, &mut added);
-            } else if !added.is_empty() {
-                // rows of column j are below j; the gained rows start at j
-                let gained = std::mem::take(&mut added);
-                let from = gained.partition_point(|&r| r as usize <= j);
-                self.merge_rows(j, &gained[from..], &mut added);
-            }
+            self.merge_rows(j, &extra[from..], &mut added);
             let new_parent = self.parent(j);
             if new_parent != old_parent {
                 self.reparent(j, old_parent);
@@ -132,13 +146,14 @@ impl<T: Scalar> DynamicLdlt<T> {
                 result = Err(e);
                 break;
             }
-            // a new parent did not nest this column's old rows: merge in full
-            full_merge = new_parent != old_parent && old_parent.is_some();
-            if full_merge {
-                carry.clear();
-                carry.extend_from_slice(&self.cols[j].rows);
+            // what the parent may be missing: the rows column j gained, or,
+            // when a new parent did not nest its old rows, all of them
+            let full = new_parent != old_parent && old_parent.is_some();
+            let gained = if full { &self.cols[j].rows[..] } else { &added[..] };
+            match new_parent {
+                Some(p) => paths.advance(slot, p, gained),
+                None => paths.end(slot),
             }
-            next = new_parent;
         }
         if let (Some(a), Ok(())) = (&mut self.augmented, &result) {
             // the augmented pivot is the last column of every walk
@@ -146,8 +161,9 @@ impl<T: Scalar> DynamicLdlt<T> {
                 a.pivot += a_t * tail[t].abs2();
             }
         }
-        self.carry = carry;
+        self.extra = extra;
         self.added = added;
+        self.paths = paths;
         result
     }
 
@@ -319,4 +335,75 @@ fn is_subset(a: &[u32], b: &[u32]) -> bool {
         k += 1;
     }
     true
+}
+
+/// The paths of one multiple-rank walk (Davis and Hager's multiple-rank
+/// modification): each vector climbs the elimination tree from its first
+/// nonzero; where paths reach the same column they join and go on as one.
+/// Each holds the rows its next column must gain before its step.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct Paths {
+    /// Next column of each slot; `usize::MAX` for a free slot.
+    next: [usize; MAX_RANK],
+    /// Rows to merge into that column (unsorted, may repeat).
+    pending: [Vec<u32>; MAX_RANK],
+}
+
+impl Paths {
+    fn clear(&mut self) {
+        self.next = [usize::MAX; MAX_RANK];
+    }
+
+    /// The slot of a path at `column`, a new one if none is there; returns
+    /// its pending rows.
+    fn start(&mut self, column: usize) -> &mut Vec<u32> {
+        let slot = match self.next.iter().position(|&n| n == column) {
+            Some(s) => s,
+            None => {
+                let s = self
+                    .next
+                    .iter()
+                    .position(|&n| n == usize::MAX)
+                    .expect("at most MAX_RANK vectors, one path each");
+                self.next[s] = column;
+                self.pending[s].clear();
+                s
+            }
+        };
+        &mut self.pending[slot]
+    }
+
+    /// The lowest column some path is at.
+    fn lowest(&self) -> Option<usize> {
+        self.next.iter().copied().filter(|&n| n != usize::MAX).min()
+    }
+
+    /// Joins every path at `column` into the lowest such slot, appending
+    /// their pending rows to `rows`; returns the slot.
+    fn join_at(&mut self, column: usize, rows: &mut Vec<u32>) -> usize {
+        let mut slot = usize::MAX;
+        for s in 0..MAX_RANK {
+            if self.next[s] == column {
+                rows.extend_from_slice(&self.pending[s]);
+                if slot == usize::MAX {
+                    slot = s;
+                } else {
+                    self.next[s] = usize::MAX;
+                }
+            }
+        }
+        slot
+    }
+
+    /// Moves `slot` on to `column`, which must gain `rows`.
+    fn advance(&mut self, slot: usize, column: usize, rows: &[u32]) {
+        self.next[slot] = column;
+        self.pending[slot].clear();
+        self.pending[slot].extend_from_slice(rows);
+    }
+
+    /// Frees `slot`: its path left the tree at a root.
+    fn end(&mut self, slot: usize) {
+        self.next[slot] = usize::MAX;
+    }
 }
