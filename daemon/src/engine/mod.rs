@@ -213,6 +213,9 @@ pub struct Engine {
     seq: u64,
     edges_since_resolve: usize,
     edges_since_refresh: usize,
+    /// Keyframes below this index are known to the running re-solve's
+    /// hints (handed over, or forwarded after an update).
+    hinted: usize,
     nnz_after_resolve: usize,
     version: u64,
     stats: EngineStats,
@@ -232,6 +235,7 @@ impl Engine {
             seq: 0,
             edges_since_resolve: 0,
             edges_since_refresh: 0,
+            hinted: 0,
             nnz_after_resolve: 0,
             version: 0,
             stats: EngineStats::default(),
@@ -345,6 +349,7 @@ impl Engine {
             moved = self.resolve_inline(false, Polish::Inline);
             resolved = true;
         }
+        self.forward_estimates();
         self.version += 1;
         if self.resolve_due() {
             self.start_job(Polish::Full);
@@ -514,6 +519,20 @@ impl Engine {
         self.config.background && self.job.is_none() && every > 0 && self.edges_since_refresh >= every
     }
 
+    /// Forwards the estimates of the keyframes added since the last call
+    /// (those that joined) to the running re-solve, as catch-up hints.
+    fn forward_estimates(&mut self) {
+        let Some(job) = &self.job else {
+            return;
+        };
+        let (model, estimate) = (&self.state.model, self.state.estimate());
+        let n = model.graph.len();
+        for k in (self.hinted..n).filter(|&k| model.joined[k]) {
+            job.hint(k, estimate[k]);
+        }
+        self.hinted = n;
+    }
+
     /// Starts a re-solve ([`Polish::Full`]) or a refresh ([`Polish::None`]).
     fn start_job(&mut self, polish: Polish) {
         self.edges_since_refresh = 0;
@@ -525,6 +544,7 @@ impl Engine {
         let estimate = self.state.estimate().to_vec();
         if self.config.background {
             self.log.clear();
+            self.hinted = self.state.model.graph.len();
             self.job = Some(Job::spawn(model, estimate, self.config.clone(), polish));
         } else {
             let (_tx, rx) = crossbeam::channel::unbounded();
@@ -553,6 +573,8 @@ impl Engine {
             tracing::warn!("Re-solve failed; keeping the current factor.");
             return false;
         };
+        // the ops it missed join where this state's solves put them
+        state.set_hints(self.state.estimate(), &self.state.model.joined);
         for (seq, op) in log {
             if outcome.last_seq.is_none_or(|last| seq > last) {
                 if let Err(e) = state.replay(&op, self.config.wildfire_threshold) {
@@ -561,6 +583,11 @@ impl Engine {
                 }
             }
         }
+        if let Err(e) = state.join_pending() {
+            tracing::warn!(error = %e, "Re-solve cannot connect the replayed edges; discarded.");
+            return false;
+        }
+        state.clear_hints();
         self.state = state;
         self.after_resolve();
         if outcome.polish == Polish::None {

@@ -4,10 +4,14 @@
 //! estimate and factorised exactly, one Gauss–Newton iteration.
 //!
 //! The foreground hands over a copy of the [`Model`] and the current
-//! estimate, and from then on forwards every [`Op`] it applies. The worker
-//! builds a fresh [`State`], replays the forwarded ops until none is left,
-//! and returns the state with the sequence number of the last op it
-//! applied; the foreground replays the few that came after and swaps.
+//! estimate, and from then on forwards every [`Op`] it applies and, after
+//! each update, its estimate of the keyframes that joined ([`Forward`]).
+//! The worker builds a fresh [`State`], replays the forwarded ops with
+//! those estimates as hints (so new keyframes join where the foreground
+//! put them, and one back-substitution ends the catch-up instead of one
+//! per keyframe), and returns the state with the sequence number of the
+//! last op it applied; the foreground replays the few that came after and
+//! swaps.
 
 use super::state::{Model, Op, Polish, State};
 use super::EngineConfig;
@@ -29,9 +33,17 @@ pub struct Outcome {
     pub polish: Polish,
 }
 
+/// What the foreground forwards to a running re-solve.
+pub enum Forward {
+    /// An op it applied, with its sequence number.
+    Op(u64, Op),
+    /// Its estimate of a keyframe that joined, after an update.
+    Estimate(usize, Pose2),
+}
+
 /// A running re-solve.
 pub struct Job {
-    ops: Sender<(u64, Op)>,
+    ops: Sender<Forward>,
     done: Receiver<Outcome>,
     handle: Option<JoinHandle<()>>,
 }
@@ -60,7 +72,12 @@ impl Job {
 
     /// Forwards an op the foreground applied.
     pub fn forward(&self, seq: u64, op: Op) {
-        let _ = self.ops.send((seq, op));
+        let _ = self.ops.send(Forward::Op(seq, op));
+    }
+
+    /// Forwards the foreground's estimate of keyframe `k`.
+    pub fn hint(&self, k: usize, pose: Pose2) {
+        let _ = self.ops.send(Forward::Estimate(k, pose));
     }
 
     /// The outcome, if the re-solve has finished.
@@ -99,12 +116,14 @@ pub fn run(
     estimate: &[Pose2],
     config: &EngineConfig,
     polish: Polish,
-    ops: &Receiver<(u64, Op)>,
+    ops: &Receiver<Forward>,
 ) -> Outcome {
     let start = Instant::now();
     let _span = tracing::debug_span!("resolve", keyframes = model.graph.len(), ?polish).entered();
+    let joined = model.joined.clone();
     let state = State::rebuild(model, estimate, polish, config);
     let mut last_seq = None;
+    let (built, mut replayed) = (start.elapsed().as_secs_f64(), 0);
     let state = state.map(|mut s| {
         // ops were validated by the foreground; a numeric failure here only
         // costs this re-solve its catch-up accuracy. Each pass takes what
@@ -112,23 +131,31 @@ pub fn run(
         // op costs about what it cost the foreground, so chasing the queue
         // to empty can last forever (a City10000 re-solve caught up for
         // 2,000 keyframes while the map drifted without one)
+        s.set_hints(estimate, &joined);
         for _ in 0..CATCH_UP_PASSES {
             let queued = ops.len();
             if queued == 0 {
                 break;
             }
-            for (seq, op) in ops.try_iter().take(queued) {
-                let _ = s.replay(&op, config.wildfire_threshold);
-                last_seq = Some(seq);
+            for forward in ops.try_iter().take(queued) {
+                match forward {
+                    Forward::Op(seq, op) => {
+                        let _ = s.replay(&op, config.wildfire_threshold);
+                        last_seq = Some(seq);
+                        replayed += 1;
+                    }
+                    Forward::Estimate(k, pose) => s.hint(k, pose),
+                }
             }
         }
         // a numeric failure here leaves the state stale; the foreground
         // will notice when its own solve fails and rebuild
         let _ = s.solve(config.wildfire_threshold);
+        s.clear_hints();
         s
     });
     let seconds = start.elapsed().as_secs_f64();
-    tracing::debug!(seconds, "Re-solve finished.");
+    tracing::debug!(seconds, built, replayed, "Re-solve finished.");
     Outcome {
         state,
         last_seq,

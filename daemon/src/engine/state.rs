@@ -40,6 +40,9 @@ pub struct State {
     drift: DriftRun,
     /// A run reached `drift_run`: the map drifted; re-solve.
     drifted: bool,
+    /// While catching up: the foreground's estimate of each keyframe it
+    /// had joined (see [`Self::set_hints`]).
+    hint: Vec<Option<Pose2>>,
 }
 
 impl State {
@@ -85,22 +88,65 @@ impl State {
             deferred: Deferred::new(config.defer_budget),
             drift: DriftRun::default(),
             drifted: false,
+            hint: Vec::new(),
         };
         state.recompute_chi2();
         state
     }
 
-    /// Applies one change as a replay does: a new keyframe first solves
-    /// for the edges before it, as the foreground did at each update, so
-    /// that its loop closures meet an estimate the earlier ones corrected.
-    /// Connected all at once (odometry first), they met hundreds of
-    /// dead-reckoned keyframes, entered the factor with large errors, and
-    /// each walked the whole appended chain.
+    /// Applies one change as a catch-up does: before a new keyframe, the
+    /// edges of the ones before it connect, as they did at the
+    /// foreground's update, so that its loop closures find them joined and
+    /// each walk crosses only the keyframes appended so far (connected all
+    /// at once, odometry first, every loop closure walked the whole
+    /// appended chain).
+    ///
+    /// With hints ([`Self::set_hints`]) a keyframe joins where the
+    /// foreground put it, loop closures included, and the back-substitution
+    /// waits for the next [`Self::solve`]. Without, the keyframe is
+    /// dead-reckoned from its anchor, so the edges before it are solved for
+    /// first: otherwise its loop closures met hundreds of dead-reckoned
+    /// keyframes and entered the factor with large errors.
     pub fn replay(&mut self, op: &Op, threshold: f64) -> Result<(), EngineError> {
         if matches!(op, Op::Keyframe { .. }) && !self.model.pending.is_empty() {
-            self.solve(threshold)?;
+            if self.hint.is_empty() {
+                self.solve(threshold)?;
+            } else {
+                self.join_pending()?;
+            }
         }
         self.apply(op)
+    }
+
+    /// Catching up with a foreground whose estimate is `estimate` over the
+    /// keyframes flagged `joined`: a keyframe `k` that joins through
+    /// anchor `m` takes the foreground's relative pose `F_m⁻¹ F_k`, so the
+    /// new part of the map arrives in the shape the foreground's solves
+    /// gave it (its loop closures applied) rather than dead-reckoned.
+    pub fn set_hints(&mut self, estimate: &[Pose2], joined: &[bool]) {
+        self.hint = (estimate.iter().zip(joined))
+            .map(|(&p, &j)| j.then_some(p))
+            .collect();
+    }
+
+    /// The foreground's estimate of keyframe `k`, forwarded during a
+    /// catch-up.
+    pub fn hint(&mut self, k: usize, pose: Pose2) {
+        if self.hint.len() <= k {
+            self.hint.resize(k + 1, None);
+        }
+        self.hint[k] = Some(pose);
+    }
+
+    /// Ends a catch-up: keyframes join dead-reckoned again.
+    pub fn clear_hints(&mut self) {
+        self.hint = Vec::new();
+    }
+
+    /// Connects the pending edges and fixes without solving.
+    pub fn join_pending(&mut self) -> Result<(), EngineError> {
+        let connected = self.connect_pending();
+        self.apply_fixes().and(connected)
     }
 
     /// Applies one change. Nothing is stored when it is rejected.
@@ -287,8 +333,13 @@ impl State {
                     } else {
                         edge.measurement.inverse()
                     };
-                    let guess = self.model.graph.keyframes()[k]
-                        .guess
+                    let hinted = match (self.hint.get(k), self.hint.get(m)) {
+                        (Some(&Some(hk)), Some(&Some(hm))) => {
+                            Some(self.estimate[m].compose(&hm.inverse().compose(&hk)))
+                        }
+                        _ => None,
+                    };
+                    let guess = (hinted.or(self.model.graph.keyframes()[k].guess))
                         .unwrap_or_else(|| self.estimate[m].compose(&rel));
                     self.join(k, m, guess);
                     queue.extend(self.model.waiting.remove(&k).unwrap_or_default());
@@ -384,7 +435,7 @@ impl State {
     /// Brings the estimate up to date (see [`GaussNewton::solve`]) and the
     /// cached χ² with it. Returns the number of keyframes that moved.
     pub fn solve(&mut self, threshold: f64) -> Result<usize, EngineError> {
-        let connected = self.connect_pending().and(self.apply_fixes());
+        let connected = self.join_pending();
         let mut moved = self.solve_factor(threshold)?;
         connected?;
         // the estimate moved: waiting loop closures over budget enter, and
@@ -592,5 +643,65 @@ impl State {
     /// A copy of the model, for a rebuild elsewhere.
     pub fn model(&self) -> &Model {
         &self.model
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::engine::EdgeInput;
+    use crate::graph::Information;
+
+    fn keyframe(id: KeyframeId) -> Op {
+        Op::Keyframe { id, guess: None }
+    }
+
+    fn odometry(from: KeyframeId, to: KeyframeId, step: Pose2) -> Op {
+        Op::Edge(EdgeInput::new(
+            from,
+            to,
+            step,
+            Information::identity(),
+            EdgeKind::Odometry,
+        ))
+    }
+
+    fn close(a: Pose2, b: Pose2) -> bool {
+        (a.x - b.x).abs() < 1e-12 && (a.y - b.y).abs() < 1e-12 && (a.theta - b.theta).abs() < 1e-12
+    }
+
+    /// A caught-up keyframe joins at its anchor moved by the foreground's
+    /// relative pose `F_m⁻¹ F_k`; without a hint, dead-reckoned.
+    #[test]
+    fn a_hinted_keyframe_joins_where_the_foreground_put_it() {
+        let step = Pose2::new(1.0, 0.0, 0.0);
+        let mut plain = State::new(&EngineConfig::default());
+        for op in [keyframe(0), keyframe(1), odometry(0, 1, step)] {
+            plain.replay(&op, 0.0).unwrap();
+        }
+        plain.solve(0.0).unwrap();
+        let mut hinted = plain.clone();
+        // the foreground's map sits elsewhere, and its solves bent keyframe
+        // 2 away from the odometry
+        let f1 = Pose2::new(5.0, -2.0, 0.7);
+        let relative = Pose2::new(0.5, 0.2, 0.1);
+        hinted.set_hints(&[Pose2::IDENTITY, f1], &[true, true]);
+        hinted.hint(2, f1.compose(&relative));
+        for state in [&mut plain, &mut hinted] {
+            state.replay(&keyframe(2), 0.0).unwrap();
+            state.replay(&odometry(1, 2, step), 0.0).unwrap();
+            state.join_pending().unwrap();
+        }
+        let anchor = plain.estimate()[1];
+        assert!(close(plain.estimate()[2], anchor.compose(&step)));
+        assert!(close(hinted.estimate()[1], anchor));
+        assert!(close(hinted.estimate()[2], anchor.compose(&relative)));
+        // the catch-up over, keyframes join dead-reckoned again
+        hinted.clear_hints();
+        hinted.replay(&keyframe(3), 0.0).unwrap();
+        hinted.replay(&odometry(2, 3, step), 0.0).unwrap();
+        hinted.join_pending().unwrap();
+        let k2 = hinted.estimate()[2];
+        assert!(close(hinted.estimate()[3], k2.compose(&step)));
     }
 }
