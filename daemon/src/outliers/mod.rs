@@ -20,7 +20,10 @@ mod robust;
 pub use cycles::{CycleCheck, CycleParams, Verdict};
 pub use drift::DriftRun;
 pub use kernel::Kernel;
-pub use robust::{robust_polish, RobustSolution, DORMANT_BELOW, PROBE_ITERATIONS, PRUNE_RATIO};
+pub use robust::{
+    robust_polish, RobustSolution, ABANDON_RATIO, DORMANT_BELOW, LOOK_ITERATIONS, PROBE_ITERATIONS,
+    PRUNE_RATIO,
+};
 
 use crate::graph::{Edge, EdgeKind};
 
