@@ -6,8 +6,9 @@ use slamd::eval::ate;
 use slamd::geometry::Pose2;
 use slamd::graph::{EdgeKind, Information, PoseGraph};
 use slamd::outliers::REJECTED_BELOW;
+use slamd::solver::{solve_batch, BatchOptions};
 use slamd::synthetic::{generate, WorldParams};
-use slamd_tests::{dataset, run_json};
+use slamd_tests::{dataset, max_pose_error, run_json};
 use std::collections::{BTreeSet, HashMap};
 use std::process::Command;
 
@@ -301,6 +302,9 @@ fn a_drifted_loop_is_taken_back_before_any_scheduled_resolve() {
             ..EngineConfig::default()
         };
         config.outliers.drift_run = drift_run;
+        // the gate that knows the map's uncertainty takes the revisit on
+        // arrival (next test); this one is about the drift check alone
+        config.outliers.arrival_covariance = false;
         let (engine, sent) = slamd_tests::replay(&g, config, |_, _| {});
         let off = sent
             .iter()
@@ -323,4 +327,51 @@ fn a_drifted_loop_is_taken_back_before_any_scheduled_resolve() {
     let (off, resolves) = online(20);
     assert!(resolves >= 1, "no drift re-solve");
     assert_eq!(off, 0, "{off} true loop closures still rejected");
+}
+
+#[test]
+fn a_drifted_loop_passes_the_gate_that_knows_the_maps_uncertainty() {
+    let g = drifted_loop();
+    let closures: Vec<usize> = (0..g.edges().len())
+        .filter(|&e| g.edges()[e].kind == EdgeKind::LoopClosure)
+        .collect();
+    // no scheduled re-solve and no drift check: what stands is what the
+    // arrival gate decided (the nonlinearity check relinearises once the
+    // loop has closed, keeping the switches it finds)
+    let online = |covariance: bool| {
+        let mut config = EngineConfig {
+            background: false,
+            resolve_every_edges: 0,
+            resolve_fill_ratio: 0.0,
+            ..EngineConfig::default()
+        };
+        config.outliers.drift_run = 0;
+        config.outliers.arrival_covariance = covariance;
+        let (engine, sent) = slamd_tests::replay(&g, config, |_, _| {});
+        assert_eq!(engine.stats().drift_resolves, 0);
+        let off = sent
+            .iter()
+            .enumerate()
+            .filter(|&(_, e)| closures.contains(e))
+            .filter(|&(n, _)| engine.switches()[n] < REJECTED_BELOW)
+            .count();
+        let poses: Vec<Pose2> = engine.snapshot().poses().map(|(_, p)| p).collect();
+        (off, poses)
+    };
+    let options = BatchOptions {
+        polish: true,
+        ..Default::default()
+    };
+    let best = solve_batch(&g, &options).unwrap();
+    // against Ω alone the first loop closure is 200 m of drift away
+    let (off, bent) = online(false);
+    assert!(off >= 55, "only {off} of 60 rejected by the plain gate");
+    let bent = max_pose_error(&bent, &best.poses);
+    assert!(bent > 20.0, "{bent} m from the optimum with the revisit rejected");
+    // against Ω⁻¹ + J Σ Jᵀ the loop's two ends are known that loosely
+    let (off, closed) = online(true);
+    assert_eq!(off, 0, "{off} true loop closures rejected on arrival");
+    // and the map closed: the last snapshot is where the optimum is
+    let closed = max_pose_error(&closed, &best.poses);
+    assert!(closed < 0.5, "{closed} m from the optimum");
 }

@@ -37,6 +37,7 @@
 //!
 //! [engine.outliers]            # see slamd::outliers::OutlierConfig
 //! drift_run = 20               # agreeing rejections in a row that mean drift: re-solve
+//! arrival_covariance = true    # a loop closure the gate turns away is tried against the map's uncertainty
 //! ```
 
 use crate::engine::EngineConfig;

@@ -24,7 +24,7 @@ use crate::geometry::Pose2;
 use crate::graph::{Edge, PoseGraph};
 use crate::nonlinear::structure::{jacobian, HessianStructure, NONE};
 use crate::nonlinear::{PositionPrior, Problem};
-use crate::sparse::dynamic::{AugmentedCholesky, DynamicLdlt, UpdateError, MAX_RANK};
+use crate::sparse::dynamic::{AugmentedCholesky, DynamicLdlt, Marginal, UpdateError, MAX_RANK};
 use crate::sparse::FactorError;
 
 /// The linearised system and the estimate it gives.
@@ -42,6 +42,7 @@ pub struct GaussNewton {
     epoch: u32,
     /// Update vectors (with their tails) waiting for one walk.
     batch: Vec<(Vec<(usize, f64)>, f64)>,
+    marginal: Marginal,
 }
 
 impl GaussNewton {
@@ -57,6 +58,7 @@ impl GaussNewton {
             stamp: vec![0],
             epoch: 0,
             batch: Vec::new(),
+            marginal: Marginal::default(),
         }
     }
 
@@ -107,6 +109,7 @@ impl GaussNewton {
             stamp: vec![0; n],
             epoch: 0,
             batch: Vec::new(),
+            marginal: Marginal::default(),
         };
         for k in order {
             gn.refresh_estimate(*k);
@@ -177,6 +180,49 @@ impl GaussNewton {
         let tails = -(lt * e);
         let vectors = (0..2).map(|r| (vec![(c, lt[(r, 0)]), (c + 1, lt[(r, 1)])], tails[r]));
         self.apply(vectors, 1.0)
+    }
+
+    /// `eᵀ S⁻¹ e` for an edge whose error at the estimate is `e`, with the
+    /// innovation covariance `S = Ω⁻¹ + J Σ Jᵀ`: `Σ = H⁻¹` is the
+    /// estimate's covariance in this linearisation and `J` the edge's
+    /// Jacobian, so `S` says how well the map knows the relative pose the
+    /// edge measures (iSAM's data-association test). Applies the waiting
+    /// updates first. `None` when a keyframe has no columns or no weight.
+    pub fn innovation_chi2(
+        &mut self,
+        edge: &Edge,
+        e: &[f64; 3],
+        variance_factor: f64,
+    ) -> Result<Option<f64>, UpdateError> {
+        self.flush()?;
+        let (j, _) = jacobian(edge, &self.lin[edge.from], &self.lin[edge.to]);
+        let mut v: [Vec<(usize, f64)>; 3] = Default::default();
+        for (a, k) in [edge.from, edge.from, edge.from, edge.to, edge.to, edge.to]
+            .into_iter()
+            .enumerate()
+        {
+            let c = self.column[k];
+            if c == NONE {
+                // the gauge is fixed; any other keyframe must be in
+                if k != 0 {
+                    return Ok(None);
+                }
+                continue;
+            }
+            for (r, w) in v.iter_mut().enumerate() {
+                w.push((c as usize + a % 3, j[(r, a)]));
+            }
+        }
+        let Some(jsj) = self.marginal.form(self.chol.factor(), [&v[0], &v[1], &v[2]]) else {
+            return Ok(None);
+        };
+        let s = edge
+            .information
+            .matrix()
+            .try_inverse()
+            .map(|cov| cov + variance_factor * jsj);
+        let e = nalgebra::Vector3::from(*e);
+        Ok(s.and_then(|s| s.cholesky()).map(|c| e.dot(&c.solve(&e))))
     }
 
     /// Batches update vectors (`sigma > 0`), or applies a downdate now

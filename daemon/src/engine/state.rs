@@ -12,7 +12,7 @@ pub use super::op::{Op, Polish, SnapshotSource};
 use super::{EngineConfig, EngineError};
 use crate::geometry::Pose2;
 use crate::gps::Georef;
-use crate::graph::{edge_chi2, EdgeKind, KeyframeId};
+use crate::graph::{edge_chi2, edge_error, EdgeKind, KeyframeId};
 use crate::outliers::{DriftRun, OutlierConfig, OFF_BELOW};
 use crate::sparse::ordering::amd_newest_last;
 use crate::sparse::FactorError;
@@ -296,7 +296,20 @@ impl State {
                     // with the switch its error has now
                     if self.outliers.switchable(&edge) {
                         let (xi, xj) = (&self.estimate[i], &self.estimate[j]);
-                        self.model.switch[e] = self.outliers.arrival_switch(&edge, xi, xj);
+                        let mut s = self.outliers.arrival_switch(&edge, xi, xj);
+                        if s < OFF_BELOW && self.outliers.arrival_covariance {
+                            let factor = self.variance_factor();
+                            if let Some(gn) = &mut self.gn {
+                                let err = edge_error(&edge, xi, xj);
+                                let innovation = gn
+                                    .innovation_chi2(&edge, &err, factor)
+                                    .map_err(EngineError::Numeric)?;
+                                if innovation.is_some_and(|chi2| chi2 <= self.outliers.arrival_phi) {
+                                    s = 1.0;
+                                }
+                            }
+                        }
+                        self.model.switch[e] = s;
                         let run = self.outliers.drift_run;
                         if run > 0 && self.model.switch[e] < OFF_BELOW {
                             let phi = self.outliers.arrival_phi;
@@ -386,6 +399,23 @@ impl State {
             && self
                 .deferred
                 .admits(s * edge_chi2(edge, &self.estimate), self.chi2)
+    }
+
+    /// The a-posteriori variance factor `χ² / r` of the estimate (`r`: the
+    /// redundancy, three per applied edge less three per keyframe past the
+    /// gauge), within [10⁻³, 1]; 1 while `r < 30`.
+    fn variance_factor(&self) -> f64 {
+        let m = &self.model;
+        let edges = (0..m.applied.len())
+            .filter(|&e| m.applied[e] && m.weight(e) > 0.0)
+            .count();
+        let keyframes = m.joined.iter().filter(|&&j| j).count();
+        let r = 3 * edges as i64 - 3 * (keyframes as i64 - 1);
+        if r < 30 {
+            1.0
+        } else {
+            (self.chi2 / r as f64).clamp(1e-3, 1.0)
+        }
     }
 
     /// Keyframe `k` joins through an edge from `anchor`, at `guess`.

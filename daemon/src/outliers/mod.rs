@@ -41,6 +41,12 @@ pub struct OutlierConfig {
     /// measured against has not seen it yet and may carry drift, so the
     /// arrival gate is wider than the kernel the re-solve applies.
     pub arrival_phi: f64,
+    /// A loop closure the gate would switch off is measured again against
+    /// its innovation covariance `Ω⁻¹ + J Σ Jᵀ` (`Σ`: the estimate's
+    /// covariance, read off the factor), and takes the larger switch: the
+    /// first loop closure of a long drifted loop is surprising only
+    /// against `Ω`, not against how loosely the map holds its two ends.
+    pub arrival_covariance: bool,
     /// This many agreeing loop closures switched off on arrival in a row
     /// mean the map drifted, not that they are wrong: the engine re-solves
     /// at once (see [`drift`]; 0: never). Twice Vertigo's group of ten.
@@ -57,6 +63,7 @@ impl Default for OutlierConfig {
             enabled: true,
             kernel: Kernel::default(),
             arrival_phi: 16.27,
+            arrival_covariance: true,
             drift_run: 20,
             cycles: false,
             cycle: CycleParams::default(),

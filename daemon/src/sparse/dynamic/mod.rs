@@ -12,7 +12,9 @@
 //! - [`AugmentedCholesky`] does the same on the factor of `[A b; bᴴ β]`,
 //!   where the updates carry the right-hand side and the forward solve rides
 //!   along their walks (the Gauss–Newton system, whose `b` changes only with
-//!   its updates).
+//!   its updates);
+//! - [`Marginal`] reads `Vᵀ A⁻¹ V` for three sparse vectors off the paths
+//!   of their columns (an edge's predicted-error covariance).
 //!
 //! Columns are stored one per `Vec` (rows sorted, strictly below the
 //! diagonal), so that fill can grow any column, with where their runs of
@@ -23,12 +25,14 @@
 
 mod augmented;
 mod factor;
+mod marginal;
 pub(crate) mod runs;
 mod solve;
 mod update;
 
 pub use augmented::{AugmentedCholesky, SolveStats};
 pub use factor::{DynamicLdlt, WalkStats};
+pub use marginal::Marginal;
 pub use solve::IncrementalCholesky;
 pub use update::{UpdateError, MAX_RANK};
 

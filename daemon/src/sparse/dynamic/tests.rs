@@ -1,7 +1,7 @@
 //! Property tests: every sequence of appends, updates and downdates keeps
 //! `L D Lᴴ = A`, and the incremental solve matches a dense solve.
 
-use super::{AugmentedCholesky, DynamicLdlt, IncrementalCholesky, MAX_RANK};
+use super::{AugmentedCholesky, DynamicLdlt, IncrementalCholesky, Marginal, MAX_RANK};
 use crate::sparse::{Scalar, UpperCsc};
 use faer::c64;
 use faer::sparse::linalg::SupernodalThreshold;
@@ -592,4 +592,51 @@ fn vectors_on_separate_branches_walk_their_own_paths_and_join() {
         dense += &v * v.transpose();
     }
     assert!(close(&to_c(&f.to_dense()), &dense, 1e-12));
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 64, ..ProptestConfig::default() })]
+
+    /// `Vᵀ A⁻¹ V` read off the paths matches the dense inverse, on a
+    /// shuffled ordering and after an update (so the paths are the grown
+    /// ones), for vectors over scattered columns.
+    #[test]
+    fn marginal_form_matches_the_dense_inverse(
+        n in 3usize..30,
+        seed in prop::collection::vec((0usize..40, 0usize..40, -1.0..1.0f64), 0..40),
+        v in prop::collection::vec((0usize..40, 0usize..3, -2.0..2.0f64), 1..9),
+        p in any::<u64>(),
+    ) {
+        let seed: Vec<_> = seed.iter().map(|&(i, j, a)| (i, j, a, 0.0)).collect();
+        let (a, mut dense) = start::<f64>(n, &seed);
+        let mut perm: Vec<usize> = (0..n).collect();
+        perm.sort_by_key(|&i| (i as u64).wrapping_mul(p | 1).rotate_left(17));
+        let mut f = DynamicLdlt::<f64>::from_matrix(&a, &perm).unwrap();
+        // the factor's columns are in elimination order: column c holds
+        // variable perm[c]
+        let w = [(0, 0.5), (n - 1, -0.7)];
+        f.rank_k_with(&[&w], 1.0, |_, _| {}).unwrap();
+        for &(c, wc) in &w {
+            for &(d, wd) in &w {
+                dense[(perm[c], perm[d])] += c64::new(wc * wd, 0.0);
+            }
+        }
+        let mut vectors: [Vec<(usize, f64)>; 3] = Default::default();
+        let mut dense_v = DMatrix::<c64>::zeros(n, 3);
+        for &(i, r, x) in &v {
+            let c = i % n;
+            if vectors[r].iter().all(|&(k, _)| k != c) {
+                vectors[r].push((c, x));
+                dense_v[(perm[c], r)] = c64::new(x, 0.0);
+            }
+        }
+        let got = Marginal::default().form(&f, [&vectors[0], &vectors[1], &vectors[2]]).unwrap();
+        let want = dense_v.adjoint() * dense.try_inverse().unwrap() * &dense_v;
+        for r in 0..3 {
+            for s in 0..3 {
+                let scale = want[(r, r)].re.abs().max(want[(s, s)].re.abs()).max(1.0);
+                prop_assert!((got[(r, s)] - want[(r, s)].re).abs() <= 1e-9 * scale, "{r},{s}: {} vs {}", got[(r, s)], want[(r, s)].re);
+            }
+        }
+    }
 }

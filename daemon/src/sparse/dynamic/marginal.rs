@@ -1,0 +1,78 @@
+//! [`Marginal`]: `Vᵀ A⁻¹ V` for three sparse vectors, read off the factor.
+//!
+//! With `A = L D Lᵀ`, `Vᵀ A⁻¹ V = Yᵀ D⁻¹ Y` where `Y = L⁻¹ V`. The pattern
+//! of `Y` is the union of the elimination-tree paths from the nonzeros of
+//! `V` to the root (the rows of a column are its ancestors), so the forward
+//! solve runs over those columns only, in ascending order: the cost of one
+//! update's walk, with nothing written to the factor. The engine uses it
+//! for the covariance `J Σ Jᵀ` of an edge's predicted error (`Σ = H⁻¹`).
+
+use super::DynamicLdlt;
+use nalgebra::Matrix3;
+
+/// Scratch for [`Marginal::form`], kept between calls (dense per column,
+/// zero outside a call).
+#[derive(Clone, Debug, Default)]
+pub struct Marginal {
+    y: Vec<[f64; 3]>,
+    on_path: Vec<bool>,
+    path: Vec<usize>,
+}
+
+impl Marginal {
+    /// `Vᵀ A⁻¹ V`, where `v[r]` lists the nonzeros `(column, value)` of
+    /// vector `r`. `None` when a pivot on the path is zero while `Y` is not
+    /// (a variable with no weight: infinite variance).
+    pub fn form(&mut self, factor: &DynamicLdlt<f64>, v: [&[(usize, f64)]; 3]) -> Option<Matrix3<f64>> {
+        let n = factor.len();
+        if self.y.len() < n {
+            self.y.resize(n, [0.0; 3]);
+            self.on_path.resize(n, false);
+        }
+        self.path.clear();
+        for (r, w) in v.iter().enumerate() {
+            for &(c, value) in w.iter() {
+                self.y[c][r] += value;
+                let mut k = Some(c);
+                while let Some(j) = k.filter(|&j| !self.on_path[j]) {
+                    self.on_path[j] = true;
+                    self.path.push(j);
+                    k = factor.parent(j);
+                }
+            }
+        }
+        self.path.sort_unstable();
+        let mut form = Some(Matrix3::zeros());
+        for &j in &self.path {
+            let y = self.y[j];
+            if y == [0.0; 3] {
+                continue;
+            }
+            let d = factor.d(j);
+            if d <= 0.0 {
+                form = None;
+                break;
+            }
+            if let Some(m) = form.as_mut() {
+                for a in 0..3 {
+                    for b in 0..3 {
+                        m[(a, b)] += y[a] * y[b] / d;
+                    }
+                }
+            }
+            let (rows, vals) = factor.column(j);
+            for (&i, &l) in rows.iter().zip(vals) {
+                let yi = &mut self.y[i as usize];
+                for r in 0..3 {
+                    yi[r] -= l * y[r];
+                }
+            }
+        }
+        // every row written is an ancestor of a path column, so on the path
+        for &j in &self.path {
+            self.y[j] = [0.0; 3];
+            self.on_path[j] = false;
+        }
+        form
+    }
+}
