@@ -183,9 +183,10 @@ impl GaussNewton {
     }
 
     /// `eᵀ S⁻¹ e` for an edge whose error at the estimate is `e`, with the
-    /// innovation covariance `S = Ω⁻¹ + J Σ Jᵀ`: `Σ = H⁻¹` is the
-    /// estimate's covariance in this linearisation and `J` the edge's
-    /// Jacobian, so `S` says how well the map knows the relative pose the
+    /// innovation covariance `S = Ω⁻¹ + σ² J Σ Jᵀ`: `Σ = H⁻¹` is the
+    /// estimate's covariance in this linearisation, `J` the edge's
+    /// Jacobian and `σ²` = `variance_factor` the scale the graph's weights
+    /// are off by, so `S` says how well the map knows the relative pose the
     /// edge measures (iSAM's data-association test). Applies the waiting
     /// updates first. `None` when a keyframe has no columns or no weight.
     pub fn innovation_chi2(

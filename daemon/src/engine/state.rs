@@ -12,7 +12,7 @@ pub use super::op::{Op, Polish, SnapshotSource};
 use super::{EngineConfig, EngineError};
 use crate::geometry::Pose2;
 use crate::gps::Georef;
-use crate::graph::{edge_chi2, edge_error, EdgeKind, KeyframeId};
+use crate::graph::{edge_chi2, edge_error, Edge, EdgeKind, KeyframeId};
 use crate::outliers::{DriftRun, OutlierConfig, OFF_BELOW};
 use crate::sparse::ordering::amd_newest_last;
 use crate::sparse::FactorError;
@@ -295,23 +295,10 @@ impl State {
                     // a new loop closure between mapped keyframes enters
                     // with the switch its error has now
                     if self.outliers.switchable(&edge) {
-                        let (xi, xj) = (&self.estimate[i], &self.estimate[j]);
-                        let mut s = self.outliers.arrival_switch(&edge, xi, xj);
-                        if s < OFF_BELOW && self.outliers.arrival_covariance {
-                            let factor = self.variance_factor();
-                            if let Some(gn) = &mut self.gn {
-                                let err = edge_error(&edge, xi, xj);
-                                let innovation = gn
-                                    .innovation_chi2(&edge, &err, factor)
-                                    .map_err(EngineError::Numeric)?;
-                                if innovation.is_some_and(|chi2| chi2 <= self.outliers.arrival_phi) {
-                                    s = 1.0;
-                                }
-                            }
-                        }
-                        self.model.switch[e] = s;
+                        self.model.switch[e] = self.arrival_switch(&edge)?;
                         let run = self.outliers.drift_run;
                         if run > 0 && self.model.switch[e] < OFF_BELOW {
+                            let (xi, xj) = (&self.estimate[i], &self.estimate[j]);
                             let phi = self.outliers.arrival_phi;
                             if self.drift.rejected(&edge, xi, xj, i.max(j), phi) >= run {
                                 self.drifted = true;
@@ -399,6 +386,31 @@ impl State {
             && self
                 .deferred
                 .admits(s * edge_chi2(edge, &self.estimate), self.chi2)
+    }
+
+    /// The switch a new loop closure between joined keyframes enters with:
+    /// DCS's at the estimate ([`OutlierConfig::arrival_switch`]); or, where
+    /// that turns it away and `arrival_covariance` is on, 1 when its error
+    /// is within `arrival_phi` of its innovation covariance (the map holds
+    /// its two ends that loosely: the first loop closure of a drifted loop).
+    fn arrival_switch(&mut self, edge: &Edge) -> Result<f64, EngineError> {
+        let (xi, xj) = (&self.estimate[edge.from], &self.estimate[edge.to]);
+        let s = self.outliers.arrival_switch(edge, xi, xj);
+        if s >= OFF_BELOW || !self.outliers.arrival_covariance {
+            return Ok(s);
+        }
+        let e = edge_error(edge, xi, xj);
+        let factor = self.variance_factor();
+        let Some(gn) = &mut self.gn else {
+            return Ok(s);
+        };
+        let innovation = gn
+            .innovation_chi2(edge, &e, factor)
+            .map_err(EngineError::Numeric)?;
+        Ok(match innovation {
+            Some(chi2) if chi2 <= self.outliers.arrival_phi => 1.0,
+            _ => s,
+        })
     }
 
     /// The a-posteriori variance factor `χ² / r` of the estimate (`r`: the
