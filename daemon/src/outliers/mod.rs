@@ -42,10 +42,12 @@ pub struct OutlierConfig {
     /// arrival gate is wider than the kernel the re-solve applies.
     pub arrival_phi: f64,
     /// A loop closure the gate would switch off is measured again against
-    /// its innovation covariance `Ω⁻¹ + J Σ Jᵀ` (`Σ`: the estimate's
-    /// covariance, read off the factor), and takes the larger switch: the
-    /// first loop closure of a long drifted loop is surprising only
-    /// against `Ω`, not against how loosely the map holds its two ends.
+    /// its innovation covariance `Ω⁻¹ + σ² J Σ Jᵀ` (`Σ`: the estimate's
+    /// covariance, read off the factor; `σ²`: the estimate's variance
+    /// factor χ²/r in [10⁻³, 1]), and enters with switch 1 when that χ² is
+    /// within `arrival_phi`; otherwise the gate's switch stands. The first
+    /// loop closure of a long drifted loop is surprising only against `Ω`,
+    /// not against how loosely the map holds its two ends.
     pub arrival_covariance: bool,
     /// This many agreeing loop closures switched off on arrival in a row
     /// mean the map drifted, not that they are wrong: the engine re-solves
