@@ -372,3 +372,67 @@ fn a_drifted_loop_passes_the_gate_that_knows_the_maps_uncertainty() {
     let closed = max_pose_error(&closed, &best.poses);
     assert!(closed < 0.5, "{closed} m from the optimum");
 }
+
+/// A straight chain of 200 exact one-metre steps whose odometry claims
+/// ringCity's information (σ 5 cm, 5° per step), then one keyframe per
+/// entry of `wrong`, each closing on the keyframe 200 back with the
+/// measurement it would have if keyframe 200 sat at `wrong[n]` (and the
+/// keyframes after it moved rigidly with it). Returns the switch of each
+/// wrong loop closure after the update of its keyframe, then after the
+/// last update.
+fn loosely_held_chain(wrong: &[Pose2]) -> Vec<f64> {
+    let truth = |k: usize| Pose2::new(k as f64, 0.0, 0.0);
+    let odometry = Information::from_upper([400.0, 0.0, 0.0, 400.0, 0.0, 131.312254]).unwrap();
+    let closure = Information::from_upper([100.0, 0.0, 0.0, 100.0, 0.0, 131.312254]).unwrap();
+    let mut config = EngineConfig {
+        nonlinear_ratio: 0.0,
+        ..unscheduled()
+    };
+    config.outliers.drift_run = 0;
+    let mut engine = Engine::new(config);
+    let (mut switches, mut closures) = (Vec::new(), Vec::new());
+    for k in 0..200 + wrong.len() {
+        engine.add_keyframe(k as u64, None).unwrap();
+        if k > 0 {
+            let step = truth(k - 1).between(&truth(k));
+            let odo = EdgeInput::new(k as u64 - 1, k as u64, step, odometry, EdgeKind::Odometry);
+            engine.add_edge(odo).unwrap();
+        }
+        let lc = (k >= 200).then(|| {
+            let moved = wrong[k - 200].compose(&truth(200).inverse());
+            let z = truth(k - 200).between(&moved.compose(&truth(k)));
+            let input = EdgeInput::new(k as u64 - 200, k as u64, z, closure, EdgeKind::LoopClosure);
+            engine.add_edge(input).unwrap()
+        });
+        engine.update();
+        if let Some(e) = lc {
+            switches.push(engine.switches()[e]);
+            closures.push(e);
+        }
+    }
+    // and as they stand at the end
+    switches.extend(closures.iter().map(|&e| engine.switches()[e]));
+    switches
+}
+
+#[test]
+fn a_loop_closure_only_the_maps_uncertainty_excuses_waits_for_a_second() {
+    // 60 m sideways and 0.3 rad off at the end of a chain the odometry
+    // claims to hold within a radian: against Ω (σ 10 cm) a wrong loop
+    // closure, against Ω⁻¹ + J Σ Jᵀ as plausible as a drifted revisit
+    let w = Pose2::new(200.0, 60.0, 0.3);
+    // alone, it is held off
+    let alone = loosely_held_chain(&[w]);
+    assert!(
+        alone.iter().all(|&s| s < REJECTED_BELOW),
+        "a lone one entered: {alone:?}"
+    );
+    // a second that agrees with it (the same correction of the map) brings
+    // both in, as the first loop closures of a drifted loop
+    let pair = loosely_held_chain(&[w, w]);
+    assert!(pair[0] < REJECTED_BELOW, "the first entered alone: {pair:?}");
+    assert_eq!(&pair[1..], &[1.0, 1.0, 1.0], "the agreeing pair: {pair:?}");
+    // a second that disagrees leaves both off
+    let split = loosely_held_chain(&[w, Pose2::new(200.0, -50.0, -0.2)]);
+    assert!(split.iter().all(|&s| s < REJECTED_BELOW), "{split:?}");
+}

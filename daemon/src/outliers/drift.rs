@@ -15,7 +15,9 @@
 //! gate (`eᵀ Ω e ≤ Φ` with this edge's information). Random wrong loop
 //! closures disagree; Vertigo's grouped ones agree in groups of ten. A run
 //! of agreeing rejections longer than any such group means the map
-//! drifted, and the engine re-solves at once.
+//! drifted, and the engine re-solves at once. A shorter run may enter at
+//! once when the map holds its ends loosely enough (the engine's arrival
+//! gate, `arrival_covariance`); the run names its members for that.
 
 use crate::geometry::Pose2;
 use crate::graph::Edge;
@@ -28,23 +30,50 @@ pub const RUN_GAP: usize = 50;
 pub struct DriftRun {
     /// The newer keyframe and the correction of the run's last member.
     last: Option<(usize, Pose2)>,
-    len: usize,
+    /// The run's loop closures (edge index, and whether the caller vouched
+    /// for it), oldest first.
+    members: Vec<(usize, bool)>,
 }
 
 impl DriftRun {
-    /// Records that `edge` (between keyframes at `xi`, `xj`; `newer` is the
-    /// index of its newer end) was switched off on arrival. Returns the
-    /// length of the run it now belongs to.
-    pub fn rejected(&mut self, edge: &Edge, xi: &Pose2, xj: &Pose2, newer: usize, phi: f64) -> usize {
+    /// Records that loop closure `e`, `edge` (between keyframes at `xi`,
+    /// `xj`), was switched off on arrival, and whether the caller `vouched`
+    /// for it. Returns the length of the run it now belongs to.
+    pub fn rejected(
+        &mut self,
+        e: usize,
+        vouched: bool,
+        edge: &Edge,
+        xi: &Pose2,
+        xj: &Pose2,
+        phi: f64,
+    ) -> usize {
+        let newer = edge.from.max(edge.to);
         let implied = xi.compose(&edge.measurement);
         let correction = implied.compose(&xj.inverse());
         let agrees = self.last.is_some_and(|(k, previous)| {
             let e = previous.compose(xj).between(&implied).to_array();
             newer.abs_diff(k) <= RUN_GAP && edge.information.mahalanobis(&e) <= phi
         });
-        self.len = if agrees { self.len + 1 } else { 1 };
+        if !agrees {
+            self.members.clear();
+        }
+        self.members.push((e, vouched));
         self.last = Some((newer, correction));
-        self.len
+        self.members.len()
+    }
+
+    /// How many of the run's loop closures were vouched for.
+    pub fn vouched(&self) -> usize {
+        self.members.iter().filter(|m| m.1).count()
+    }
+
+    /// The run's loop closures that were vouched for, oldest first; the
+    /// run ends.
+    pub fn take_vouched(&mut self) -> Vec<usize> {
+        self.last = None;
+        let members = std::mem::take(&mut self.members);
+        members.into_iter().filter(|m| m.1).map(|m| m.0).collect()
     }
 
     /// Ends the run (the map was corrected).
@@ -79,8 +108,18 @@ mod tests {
             let i = j - 100;
             let z = truth(i).between(&truth(j));
             let xj = drift.compose(&truth(j));
-            assert_eq!(run.rejected(&edge(i, j, z), &truth(i), &xj, j, 16.27), n + 1);
+            assert_eq!(
+                run.rejected(n, n % 2 == 0, &edge(i, j, z), &truth(i), &xj, 16.27),
+                n + 1
+            );
         }
+        // the run names the members vouched for, and taking them ends it
+        assert_eq!(run.vouched(), 13);
+        assert_eq!(run.take_vouched(), (0..25).step_by(2).collect::<Vec<_>>());
+        let z = truth(0).between(&truth(125));
+        let xj = drift.compose(&truth(125));
+        assert_eq!(run.rejected(25, true, &edge(0, 125, z), &truth(0), &xj, 16.27), 1);
+        assert_eq!(run.vouched(), 1);
     }
 
     #[test]
@@ -90,7 +129,7 @@ mod tests {
         // each one claims a different, large offset
         for (n, j) in (100..110).enumerate() {
             let z = Pose2::new(5.0 * n as f64, -3.0 * n as f64, 0.4 * n as f64);
-            let len = run.rejected(&edge(j - 50, j, z), &truth(j - 50), &truth(j), j, 16.27);
+            let len = run.rejected(n, true, &edge(j - 50, j, z), &truth(j - 50), &truth(j), 16.27);
             assert_eq!(len, 1, "rejection {n}");
         }
     }
@@ -103,12 +142,15 @@ mod tests {
         for (j, expected) in [(100, 1), (101, 2), (101 + RUN_GAP + 1, 1)] {
             let z = truth(0).between(&truth(j));
             let xj = drift.compose(&truth(j));
-            assert_eq!(run.rejected(&edge(0, j, z), &truth(0), &xj, j, 16.27), expected);
+            assert_eq!(
+                run.rejected(j, false, &edge(0, j, z), &truth(0), &xj, 16.27),
+                expected
+            );
         }
         run.clear();
         let z = truth(0).between(&truth(300));
         assert_eq!(
-            run.rejected(&edge(0, 300, z), &truth(0), &truth(300), 300, 16.27),
+            run.rejected(300, false, &edge(0, 300, z), &truth(0), &truth(300), 16.27),
             1
         );
     }

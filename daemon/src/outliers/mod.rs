@@ -44,10 +44,13 @@ pub struct OutlierConfig {
     /// A loop closure the gate would switch off is measured again against
     /// its innovation covariance `Ω⁻¹ + σ² J Σ Jᵀ` (`Σ`: the estimate's
     /// covariance, read off the factor; `σ²`: the estimate's variance
-    /// factor χ²/r in [10⁻³, 1]), and enters with switch 1 when that χ² is
-    /// within `arrival_phi`; otherwise the gate's switch stands. The first
-    /// loop closure of a long drifted loop is surprising only against `Ω`,
-    /// not against how loosely the map holds its two ends.
+    /// factor χ²/r in [10⁻³, 1]). Once two that agree (see [`drift`]) are
+    /// within `arrival_phi` of theirs, they enter with switch 1; until
+    /// then the gate's switch stands. The first loop closures of a long
+    /// drifted loop are surprising only against `Ω`, not against how
+    /// loosely the map holds their ends; a lone random wrong one can be
+    /// just as unsurprising where the odometry claims to be loose
+    /// (ringCity).
     pub arrival_covariance: bool,
     /// This many agreeing loop closures switched off on arrival in a row
     /// mean the map drifted, not that they are wrong: the engine re-solves
