@@ -3,6 +3,7 @@
 //! wait, GPS fixes and the georeference; and the re-solve's work on it
 //! (robust polish, georeferencing).
 
+use super::op::Polish;
 use super::EngineConfig;
 use crate::geometry::Pose2;
 use crate::gps::{variance_factor, Georef, GpsConfig, GpsFix, GpsInput};
@@ -86,20 +87,21 @@ impl Model {
         (edges, ids)
     }
 
-    /// The re-solve's polish ([`robust_polish`]) from the current estimate
-    /// and from the two-stage solutions with and without the switches: after a
-    /// large loop closure the estimate can sit in the wrong basin
-    /// (Manhattan's first re-solve reached χ² 50 from it against an optimum
-    /// of 24), and the two-stage solution does not depend on it. Without
-    /// `rescue` the start without switches is left out. Sets every switch
-    /// from the result; returns the poses (compact indices).
+    /// The re-solve's polish ([`robust_polish`]). [`Polish::Full`] starts
+    /// from the current estimate and from the two-stage solutions with and
+    /// without the switches: after a large loop closure the estimate can
+    /// sit in the wrong basin (Manhattan's first re-solve reached χ² 50
+    /// from it against an optimum of 24), and the two-stage solution does
+    /// not depend on it. [`Polish::Inline`] starts from the estimate alone.
+    /// Sets every switch from the result; returns the poses (compact
+    /// indices).
     pub(super) fn robust_polish(
         &mut self,
         config: &EngineConfig,
         compact: &[usize],
         joined: &[usize],
         lin: &[Pose2],
-        rescue: bool,
+        polish: Polish,
     ) -> Vec<Pose2> {
         let filter = &config.outliers;
         let (edges, ids) = self.compact_edges(compact, |m, e| m.scale[e]);
@@ -109,14 +111,15 @@ impl Model {
             .collect();
         let initial: Vec<Pose2> = joined.iter().map(|&k| lin[k]).collect();
         let mut starts = vec![initial.clone()];
-        // the two-stage solution under the current switches, and (with
-        // `rescue`, when some are below 1) under none: a loop closure
-        // switched off on arrival against a drifted estimate must get a
-        // start that does not already exclude it (W10000 otherwise lost
-        // 13,000 true ones)
-        starts.extend(self.linear_start(compact, joined, initial[0], Model::weight));
-        if rescue && ids.iter().any(|&e| self.switch[e] < 1.0) {
-            starts.extend(self.linear_start(compact, joined, initial[0], |m, e| m.scale[e]));
+        if polish == Polish::Full {
+            // the two-stage solution under the current switches, and (when
+            // some are below 1) under none: a loop closure switched off on
+            // arrival against a drifted estimate must get a start that does
+            // not already exclude it (W10000 otherwise lost 13,000 true ones)
+            starts.extend(self.linear_start(compact, joined, initial[0], Model::weight));
+            if ids.iter().any(|&e| self.switch[e] < 1.0) {
+                starts.extend(self.linear_start(compact, joined, initial[0], |m, e| m.scale[e]));
+            }
         }
         let Ok(solution) = robust_polish(&edges, &switchable, starts, filter, config.polish) else {
             return initial;

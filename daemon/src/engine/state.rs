@@ -661,8 +661,7 @@ impl State {
         let mut lin = start.to_vec();
         lin.resize(n, Pose2::IDENTITY);
         if polish != Polish::None {
-            let rescue = polish == Polish::Full;
-            let mut poses = model.robust_polish(config, &compact, &joined, &lin, rescue);
+            let mut poses = model.robust_polish(config, &compact, &joined, &lin, polish);
             let (edges, _) = model.compact_edges(&compact, Model::weight);
             model.georeference(&config.gps, &edges, &compact, &mut poses, &config.polish);
             for (c, &k) in joined.iter().enumerate() {
