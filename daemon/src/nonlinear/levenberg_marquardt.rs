@@ -77,7 +77,8 @@ impl<'a> LevenbergMarquardt<'a> {
         let structure = HessianStructure::new(gauge_first_blocks(n), n.saturating_sub(1), problem.edges);
         let hessian = structure.pattern().clone();
         let poses = pose_ordering(initial.len(), problem.edges);
-        let factor = SparseCholesky::analyze(&hessian, &Ordering::Custom(expand_blocks(&poses, 3)))?;
+        let factor =
+            SparseCholesky::analyze_supernodal(&hessian, &Ordering::Custom(expand_blocks(&poses, 3)))?;
         let chi2 = problem.chi2(&initial);
         let mut lm = Self {
             problem,
