@@ -184,7 +184,7 @@ pub fn solve_batch(graph: &PoseGraph, options: &BatchOptions) -> Result<BatchSol
         let switchable: Vec<bool> = graph.edges().iter().map(|e| filter.switchable(e)).collect();
         let mut starts = vec![poses.clone()];
         starts.extend(odometry_chain(graph));
-        let sol = robust_polish(graph.edges(), &switchable, starts, filter, options.lm)?;
+        let sol = robust_polish(graph.edges(), &switchable, starts, filter, options.lm, 2)?;
         let mut poses = sol.poses;
         if let Some(gps) = gps.filter(|g| g.absolute) {
             let edges: Vec<Edge> = (graph.edges().iter().zip(&sol.switches))

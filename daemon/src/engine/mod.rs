@@ -379,7 +379,7 @@ impl Engine {
     /// Waits for any running re-solve, then re-solves inline over
     /// everything: the polished estimate of the whole graph.
     pub fn resolve_now(&mut self) -> UpdateReport {
-        let moved = self.resolve_inline(true, Polish::Full);
+        let moved = self.resolve_inline(true, Polish::Closing);
         self.version += 1;
         UpdateReport {
             version: self.version,

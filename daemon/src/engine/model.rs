@@ -87,12 +87,13 @@ impl Model {
         (edges, ids)
     }
 
-    /// The re-solve's polish ([`robust_polish`]). [`Polish::Full`] starts
-    /// from the current estimate and from the two-stage solutions with and
-    /// without the switches: after a large loop closure the estimate can
-    /// sit in the wrong basin (Manhattan's first re-solve reached χ² 50
-    /// from it against an optimum of 24), and the two-stage solution does
-    /// not depend on it. [`Polish::Inline`] starts from the estimate alone.
+    /// The re-solve's polish ([`robust_polish`]). [`Polish::Full`] (and
+    /// [`Polish::Closing`], two starts at a time) starts from the current
+    /// estimate and from the two-stage solutions with and without the
+    /// switches: after a large loop closure the estimate can sit in the
+    /// wrong basin (Manhattan's first re-solve reached χ² 50 from it
+    /// against an optimum of 24), and the two-stage solution does not
+    /// depend on it. [`Polish::Inline`] starts from the estimate alone.
     /// Sets every switch from the result; returns the poses (compact
     /// indices).
     pub(super) fn robust_polish(
@@ -111,7 +112,7 @@ impl Model {
             .collect();
         let initial: Vec<Pose2> = joined.iter().map(|&k| lin[k]).collect();
         let mut starts = vec![initial.clone()];
-        if polish == Polish::Full {
+        if matches!(polish, Polish::Full | Polish::Closing) {
             // the two-stage solution under the current switches, and (when
             // some are below 1) under none: a loop closure switched off on
             // arrival against a drifted estimate must get a start that does
@@ -121,7 +122,8 @@ impl Model {
                 starts.extend(self.linear_start(compact, joined, initial[0], |m, e| m.scale[e]));
             }
         }
-        let Ok(solution) = robust_polish(&edges, &switchable, starts, filter, config.polish) else {
+        let threads = if polish == Polish::Closing { 2 } else { 1 };
+        let Ok(solution) = robust_polish(&edges, &switchable, starts, filter, config.polish, threads) else {
             return initial;
         };
         for (a, &e) in ids.iter().enumerate() {

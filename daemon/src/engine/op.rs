@@ -37,6 +37,9 @@ pub enum Polish {
     /// The re-solve's: the robust multi-start polish that sets the outlier
     /// filter's switches, then the georeference.
     Full,
+    /// [`Polish::Full`] with nothing else running (the re-solve that ends
+    /// a stream): its starts are probed two at a time.
+    Closing,
     /// The nonlinearity check's inline re-solve: the robust polish from
     /// the current estimate alone; the next background re-solve has the
     /// two-stage starts. The start that rescues loop closures switched off

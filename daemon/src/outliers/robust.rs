@@ -6,6 +6,7 @@ use crate::geometry::Pose2;
 use crate::graph::Edge;
 use crate::nonlinear::{polish, LevenbergMarquardtParams, LmReport, Problem, Robust};
 use crate::sparse::FactorError;
+use std::sync::{Mutex, OnceLock};
 
 /// What the robust polish found.
 #[derive(Clone, Debug)]
@@ -139,22 +140,24 @@ fn wake(edges: &[Edge], robust: &Robust<'_>, poses: &[Pose2], awake: &mut [bool]
 
 /// Probes one start for `probe.max_iterations`, or only
 /// [`LOOK_ITERATIONS`] when its cost is then still past [`ABANDON_RATIO`]
-/// times `lowest` (the lowest cost probed before it).
+/// times `lowest()` (the lowest cost probed before it; `None`: the first
+/// start). `lowest` is asked only at that check, so a start can be probed
+/// while the ones before it still run.
 fn probe_start(
     problem: Problem<'_>,
     start: Vec<Pose2>,
     probe: LevenbergMarquardtParams,
-    lowest: f64,
+    lowest: Option<&dyn Fn() -> f64>,
 ) -> Result<LmReport, FactorError> {
-    if !lowest.is_finite() || probe.max_iterations <= LOOK_ITERATIONS {
+    let Some(lowest) = lowest.filter(|_| probe.max_iterations > LOOK_ITERATIONS) else {
         return polish_awake(problem, start, probe);
-    }
+    };
     let look = LevenbergMarquardtParams {
         max_iterations: LOOK_ITERATIONS,
         ..probe
     };
     let first = polish_awake(problem, start, look)?;
-    if first.converged || first.final_chi2 > ABANDON_RATIO * lowest {
+    if first.converged || first.final_chi2 > ABANDON_RATIO * lowest() {
         return Ok(first);
     }
     let rest = LevenbergMarquardtParams {
@@ -173,6 +176,54 @@ fn probe_start(
     }
 }
 
+/// [`probe_start`] on every start, `threads` at a time; start `i`'s look
+/// check waits for the probes of the starts before it, so the outcome is
+/// the same as one at a time.
+fn probe_starts(
+    problem: Problem<'_>,
+    starts: Vec<Vec<Pose2>>,
+    probe: LevenbergMarquardtParams,
+    threads: usize,
+) -> Vec<Result<LmReport, FactorError>> {
+    let n = starts.len();
+    // the cost each probe ended at (infinite when it failed)
+    let costs: Vec<OnceLock<f64>> = (0..n).map(|_| OnceLock::new()).collect();
+    let lowest_before = |i: usize| (0..i).map(|j| *costs[j].wait()).fold(f64::INFINITY, f64::min);
+    let run = |i: usize, start: Vec<Pose2>| {
+        let lowest = || lowest_before(i);
+        let r = probe_start(
+            problem,
+            start,
+            probe,
+            (i > 0).then_some(&lowest as &dyn Fn() -> f64),
+        );
+        let _ = costs[i].set(r.as_ref().map_or(f64::INFINITY, |r| r.final_chi2));
+        r
+    };
+    if threads <= 1 || n <= 1 {
+        return starts.into_iter().enumerate().map(|(i, s)| run(i, s)).collect();
+    }
+    // starts are taken in order, so a probe only waits on ones under way
+    let queue = Mutex::new(starts.into_iter().enumerate());
+    let results = Mutex::new((0..n).map(|_| None).collect::<Vec<_>>());
+    std::thread::scope(|scope| {
+        for _ in 0..threads.min(n) {
+            scope.spawn(|| loop {
+                let Some((i, start)) = queue.lock().expect("no panics under the lock").next() else {
+                    break;
+                };
+                let r = run(i, start);
+                results.lock().expect("no panics under the lock")[i] = Some(r);
+            });
+        }
+    });
+    let results = results.into_inner().expect("the probes ended");
+    results
+        .into_iter()
+        .map(|r| r.expect("every start probed"))
+        .collect()
+}
+
 /// Paper A's cycle test (when configured) switches off what it rejects;
 /// Levenberg–Marquardt then minimises the kernel's robust cost, each
 /// switchable edge reweighted by `s²` at every iteration (edges dormant at a
@@ -180,13 +231,16 @@ fn probe_start(
 /// for [`PROBE_ITERATIONS`] (a start far above the ones before it, for
 /// [`LOOK_ITERATIONS`]: [`ABANDON_RATIO`]), then to convergence unless its
 /// cost is past [`PRUNE_RATIO`] times the lowest; the lowest final cost
-/// gives the switches. Fails when no start could be polished (or none was given).
+/// gives the switches. The starts are probed `threads` at a time, with
+/// the same outcome. Fails when no start could be polished (or none was
+/// given).
 pub fn robust_polish(
     edges: &[Edge],
     switchable: &[bool],
     starts: Vec<Vec<Pose2>>,
     config: &OutlierConfig,
     params: LevenbergMarquardtParams,
+    threads: usize,
 ) -> Result<RobustSolution, FactorError> {
     let n = starts.first().map_or(0, Vec::len);
     let mut out = vec![false; edges.len()];
@@ -218,9 +272,8 @@ pub fn robust_polish(
     };
     let mut error = FactorError::NotPositiveDefinite { step: 0 };
     let mut probed: Vec<LmReport> = Vec::new();
-    for start in starts {
-        let lowest = probed.iter().map(|r| r.final_chi2).fold(f64::INFINITY, f64::min);
-        match probe_start(problem, start, probe, lowest) {
+    for r in probe_starts(problem, starts, probe, threads) {
+        match r {
             Ok(r) => probed.push(r),
             Err(e) => error = e,
         }
@@ -319,11 +372,7 @@ mod tests {
         let switchable: Vec<bool> = edges.iter().map(|e| e.kind == EdgeKind::LoopClosure).collect();
         // odometry composed, then the last pose thrown 30 m off: the closure
         // starts with χ² ≈ 9·10⁴, a switch ≈ 10⁻⁴ (dormant)
-        let mut start = vec![Pose2::IDENTITY];
-        for e in &edges[..7] {
-            let next = start.last().unwrap().compose(&e.measurement);
-            start.push(next);
-        }
+        let mut start = square_start(&edges);
         start[7] = Pose2::new(start[7].x + 30.0, start[7].y, start[7].theta);
         let config = OutlierConfig::default();
         let (closure, robust) = (
@@ -335,7 +384,7 @@ mod tests {
         );
         assert!(config.kernel.switch(closure, &start[7], &start[0]) < DORMANT_BELOW);
         let params = LevenbergMarquardtParams::default();
-        let got = robust_polish(&edges, &switchable, vec![start.clone()], &config, params).unwrap();
+        let got = robust_polish(&edges, &switchable, vec![start.clone()], &config, params, 1).unwrap();
         // the reference: every edge in every linear system
         let problem = Problem {
             edges: &edges,
@@ -373,7 +422,7 @@ mod tests {
             max_iterations: PROBE_ITERATIONS,
             ..LevenbergMarquardtParams::default()
         };
-        let alone = probe_start(problem, start.clone(), probe, f64::INFINITY).unwrap();
+        let alone = probe_start(problem, start.clone(), probe, None).unwrap();
         assert!(
             alone.iterations.len() > LOOK_ITERATIONS,
             "{} iterations",
@@ -391,12 +440,35 @@ mod tests {
         .final_chi2;
         // an earlier start 100× below the look's cost: abandoned after it
         let lowest = after_look / (5.0 * ABANDON_RATIO);
-        let cut = probe_start(problem, start.clone(), probe, lowest).unwrap();
+        let cut = probe_start(problem, start.clone(), probe, Some(&|| lowest)).unwrap();
         assert_eq!(cut.iterations.len(), LOOK_ITERATIONS);
         assert_eq!(cut.final_chi2, after_look);
         // one just below the look's cost: the probe goes on
-        let kept = probe_start(problem, start, probe, after_look / 2.0).unwrap();
+        let kept = probe_start(problem, start.clone(), probe, Some(&|| after_look / 2.0)).unwrap();
         assert!(kept.iterations.len() > LOOK_ITERATIONS);
         assert!(kept.final_chi2 < after_look);
+        // probed two at a time, the far start still sees the near one's
+        // cost at its look, and each start ends as it does alone
+        let near = square_start(&edges);
+        let starts = vec![near.clone(), start.clone(), near];
+        let one = probe_starts(problem, starts.clone(), probe, 1);
+        let two = probe_starts(problem, starts, probe, 2);
+        assert_eq!(one[1].as_ref().unwrap().iterations.len(), LOOK_ITERATIONS);
+        for (a, b) in one.iter().zip(&two) {
+            let (a, b) = (a.as_ref().unwrap(), b.as_ref().unwrap());
+            assert_eq!(a.iterations.len(), b.iterations.len());
+            assert_eq!(a.final_chi2, b.final_chi2);
+            assert_eq!(a.poses, b.poses);
+        }
+    }
+
+    /// Odometry composed from the origin.
+    fn square_start(edges: &[Edge]) -> Vec<Pose2> {
+        let mut start = vec![Pose2::IDENTITY];
+        for e in &edges[..7] {
+            let next = start.last().unwrap().compose(&e.measurement);
+            start.push(next);
+        }
+        start
     }
 }

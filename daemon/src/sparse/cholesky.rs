@@ -239,7 +239,10 @@ mod tests {
         let b = a.mul_vec(&x);
         let mut f = SparseCholesky::analyze_supernodal(&a, &Ordering::Amd).unwrap();
         let raw = f.symbolic().raw();
-        assert!(matches!(raw, faer::sparse::linalg::cholesky::SymbolicCholeskyRaw::Supernodal(_)));
+        assert!(matches!(
+            raw,
+            faer::sparse::linalg::cholesky::SymbolicCholeskyRaw::Supernodal(_)
+        ));
         f.factorize(&a).unwrap();
         for (g, w) in f.solve(&b).iter().zip(&x) {
             assert!((g - w).abs() < 1e-12, "{g} vs {w}");
