@@ -43,6 +43,13 @@ pub trait Scalar:
     fn rank_run(w: &mut [&mut [Self]], first: usize, l: &mut [Self], p: &[Self], g: &[Self]) {
         crate::sparse::dynamic::runs::rank_run_generic(w, first, l, p, g)
     }
+    /// The same step over a column whose runs are short, row by row at
+    /// `rows`; reals take a path with fused multiply-adds when the CPU has
+    /// them.
+    #[inline]
+    fn rank_rows(w: &mut [&mut [Self]], rows: &[u32], l: &mut [Self], p: &[Self], g: &[Self]) {
+        crate::sparse::dynamic::runs::rank_rows_generic(w, rows, l, p, g)
+    }
 }
 
 impl Scalar for f64 {
@@ -81,6 +88,15 @@ impl Scalar for f64 {
             return unsafe { crate::sparse::dynamic::runs::rank_run_fma(w, first, l, p, g) };
         }
         crate::sparse::dynamic::runs::rank_run_generic(w, first, l, p, g)
+    }
+    #[inline]
+    fn rank_rows(w: &mut [&mut [Self]], rows: &[u32], l: &mut [Self], p: &[Self], g: &[Self]) {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
+            // SAFETY: the CPU has AVX2 and FMA
+            return unsafe { crate::sparse::dynamic::runs::rank_rows_fma(w, rows, l, p, g) };
+        }
+        crate::sparse::dynamic::runs::rank_rows_generic(w, rows, l, p, g)
     }
 }
 

@@ -75,10 +75,10 @@ pub(crate) fn rank_run_generic<T: Scalar>(w: &mut [&mut [T]], first: usize, l: &
 #[inline(always)]
 fn rank_run_fixed<const K: usize>(w: &mut [&mut [f64]], first: usize, l: &mut [f64], p: &[f64], g: &[f64]) {
     let n = l.len();
-    let Ok(ws) = w.get_disjoint_mut(std::array::from_fn::<usize, K, _>(|t| t)) else {
-        unreachable!("K = w.len() distinct vectors");
+    let Some((ws, _)) = w.split_first_chunk_mut::<K>() else {
+        unreachable!("K = w.len() vectors");
     };
-    let ws: [&mut [f64]; K] = ws.map(|s| &mut s[first..first + n]);
+    let ws: [&mut [f64]; K] = ws.each_mut().map(|s| &mut s[first..first + n]);
     let np: [f64; K] = std::array::from_fn(|t| -p[t]);
     let g: [f64; K] = std::array::from_fn(|t| g[t]);
     for e in 0..n {
@@ -105,6 +105,67 @@ pub(crate) unsafe fn rank_run_fma(w: &mut [&mut [f64]], first: usize, l: &mut [f
             match w.len() {
                 $($k => rank_run_fixed::<$k>(w, first, l, p, g),)*
                 _ => rank_run_generic(w, first, l, p, g),
+            }
+        };
+    }
+    fixed!(1 2 3 4 5 6 7 8 9 10 11 12)
+}
+
+/// One column step of a multiple-rank update over a column whose runs are
+/// short: [`rank_step`]'s arithmetic, row by row at the given `rows`.
+#[inline]
+pub(crate) fn rank_rows_generic<T: Scalar>(w: &mut [&mut [T]], rows: &[u32], l: &mut [T], p: &[T], g: &[T]) {
+    for (&r, lv) in rows.iter().zip(l.iter_mut()) {
+        let r = r as usize;
+        let mut x = *lv;
+        for (t, w) in w.iter_mut().enumerate() {
+            let a = w[r] - p[t] * x;
+            w[r] = a;
+            x += g[t] * a;
+        }
+        *lv = x;
+    }
+}
+
+/// [`rank_rows_generic`] for exactly `K` vectors, with fused
+/// multiply-adds: the vectors unroll and one bounds check covers them all.
+#[inline(always)]
+fn rank_rows_fixed<const K: usize>(w: &mut [&mut [f64]], rows: &[u32], l: &mut [f64], p: &[f64], g: &[f64]) {
+    // the vectors are distinct already; a short column cannot afford
+    // checking so again (`get_disjoint_mut`)
+    let Some((ws, _)) = w.split_first_chunk_mut::<K>() else {
+        unreachable!("K = w.len() vectors");
+    };
+    let n = ws[0].len();
+    let ws: [&mut [f64]; K] = ws.each_mut().map(|s| &mut s[..n]);
+    let np: [f64; K] = std::array::from_fn(|t| -p[t]);
+    let g: [f64; K] = std::array::from_fn(|t| g[t]);
+    for (&r, lv) in rows.iter().zip(l.iter_mut()) {
+        let r = r as usize;
+        assert!(r < n, "row {r} past the accumulators");
+        let mut x = *lv;
+        for t in 0..K {
+            let a = np[t].mul_add(x, ws[t][r]);
+            ws[t][r] = a;
+            x = g[t].mul_add(a, x);
+        }
+        *lv = x;
+    }
+}
+
+/// [`rank_rows_generic`] compiled with fused multiply-adds, for up to
+/// `MAX_RANK` vectors.
+///
+/// # Safety
+/// The CPU must have AVX2 and FMA.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+pub(crate) unsafe fn rank_rows_fma(w: &mut [&mut [f64]], rows: &[u32], l: &mut [f64], p: &[f64], g: &[f64]) {
+    macro_rules! fixed {
+        ($($k:literal)*) => {
+            match w.len() {
+                $($k => rank_rows_fixed::<$k>(w, rows, l, p, g),)*
+                _ => rank_rows_generic(w, rows, l, p, g),
             }
         };
     }

@@ -239,16 +239,7 @@ impl<T: Scalar> DynamicLdlt<T> {
             return Ok(());
         }
         // short runs: one pass over the rows, every vector per row
-        for (&r, l) in col.rows.iter().zip(col.vals.iter_mut()) {
-            let r = r as usize;
-            let mut lv = *l;
-            for (i, w) in w.iter_mut().enumerate() {
-                let wi = w[r] - ps[i] * lv;
-                w[r] = wi;
-                lv += gammas[i] * wi;
-            }
-            *l = lv;
-        }
+        T::rank_rows(w, &col.rows, &mut col.vals, &ps[..live], &gammas[..live]);
         Ok(())
     }
 
