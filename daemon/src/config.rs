@@ -33,6 +33,7 @@
 //! [engine]                     # see slamd::engine::EngineConfig
 //! resolve_every_edges = 3000
 //! refresh_every_edges = 50     # relinearise between re-solves when the worker is free
+//! relinearise_ratio = 1.2      # χ² past this × its linear model's (+1): relinearise inline
 //! defer_budget = 0.0           # > 0: agreeing loop closures wait while their χ² ≤ this × the estimate's
 //!
 //! [engine.outliers]            # see slamd::outliers::OutlierConfig
@@ -228,6 +229,7 @@ impl Config {
             ("engine.resolve_fill_ratio", e.resolve_fill_ratio),
             ("engine.wildfire_threshold", e.wildfire_threshold),
             ("engine.nonlinear_ratio", e.nonlinear_ratio),
+            ("engine.relinearise_ratio", e.relinearise_ratio),
             ("engine.defer_budget", e.defer_budget),
         ] {
             if !(v.is_finite() && v >= 0.0) {
