@@ -380,7 +380,7 @@ fn waiting_loop_closures_stay_within_their_budget_and_the_end_is_optimal() {
 /// The worst snapshot-to-prefix-optimum χ² ratio over every 25th of
 /// Manhattan's first 1,400 keyframes, replayed inline with
 /// `relinearise_ratio`, and how many relinearisations it made.
-fn worst_ratio_on_manhattan(relinearise_ratio: f64) -> (f64, u64) {
+fn worst_ratio_on_manhattan(relinearise_ratio: f64) -> (f64, usize) {
     let g = read("manhattanolson3500_g2oversion.g2o").prefix(1400);
     let config = EngineConfig {
         background: false,

@@ -191,7 +191,7 @@ pub struct EngineStats {
     /// Refactorisations forced by a failed downdate.
     pub recoveries: usize,
     /// Inline relinearisations (`relinearise_ratio`).
-    pub relinearisations: u64,
+    pub relinearisations: usize,
     /// Inline re-solves forced by the nonlinearity check.
     pub nonlinear_resolves: usize,
     /// Inline re-solves forced by a run of agreeing loop closures switched
@@ -341,7 +341,7 @@ impl Engine {
             tracing::debug!("Agreeing loop closures rejected on arrival; re-solving inline.");
             moved = self.resolve_inline(false, Polish::Full);
             resolved = true;
-        } else if self.beyond(self.config.nonlinear_ratio, 1.0) || self.relinearise() {
+        } else if self.beyond(self.config.nonlinear_ratio, 1.0) || self.relinearise(&mut moved) {
             self.stats.nonlinear_resolves += 1;
             tracing::debug!(
                 chi2 = self.state.chi2(),
@@ -498,9 +498,10 @@ impl Engine {
     }
 
     /// Past `relinearise_ratio`: relinearises inline (a running
-    /// background re-solve goes on and swaps in later). Returns whether the
-    /// estimate is still past it, which calls for the inline re-solve.
-    fn relinearise(&mut self) -> bool {
+    /// background re-solve goes on and swaps in later), counting what the
+    /// solve moved into `moved`. Returns whether the estimate is still
+    /// past it, which calls for the inline re-solve.
+    fn relinearise(&mut self, moved: &mut usize) -> bool {
         if !self.beyond(self.config.relinearise_ratio, RELINEARISE_SLACK) {
             return false;
         }
@@ -511,7 +512,7 @@ impl Engine {
             "Linear model off; relinearising inline."
         );
         self.rebuild_inline(Polish::None);
-        self.solve();
+        *moved = (*moved).max(self.solve());
         self.beyond(self.config.relinearise_ratio, RELINEARISE_SLACK)
     }
 

@@ -190,6 +190,8 @@ fn probe_starts(
     let costs: Vec<OnceLock<f64>> = (0..n).map(|_| OnceLock::new()).collect();
     let lowest_before = |i: usize| (0..i).map(|j| *costs[j].wait()).fold(f64::INFINITY, f64::min);
     let run = |i: usize, start: Vec<Pose2>| {
+        // a probe that panics still lets the ones waiting on it go on
+        let _unblock = Unblock(&costs[i]);
         let lowest = || lowest_before(i);
         let r = probe_start(
             problem,
@@ -222,6 +224,16 @@ fn probe_starts(
         .into_iter()
         .map(|r| r.expect("every start probed"))
         .collect()
+}
+
+/// Sets a probe's cost to infinity when it ends without one (a panic),
+/// so that the probes waiting on it do not wait forever.
+struct Unblock<'a>(&'a OnceLock<f64>);
+
+impl Drop for Unblock<'_> {
+    fn drop(&mut self) {
+        let _ = self.0.set(f64::INFINITY);
+    }
 }
 
 /// Paper A's cycle test (when configured) switches off what it rejects;
