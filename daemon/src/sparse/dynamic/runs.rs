@@ -13,6 +13,28 @@ use crate::sparse::Scalar;
 // the kernels below are written for at most this many vectors
 const _: () = assert!(super::update::MAX_RANK == 12);
 
+/// `$fixed::<K>(w, args)` for `K` = `w.len()` vectors from 1 to
+/// `MAX_RANK`, else `$generic(w, args)`.
+macro_rules! by_rank {
+    ($fixed:ident, $generic:ident, $w:ident, $($arg:ident),*) => {
+        match $w.len() {
+            1 => $fixed::<1>($w, $($arg),*),
+            2 => $fixed::<2>($w, $($arg),*),
+            3 => $fixed::<3>($w, $($arg),*),
+            4 => $fixed::<4>($w, $($arg),*),
+            5 => $fixed::<5>($w, $($arg),*),
+            6 => $fixed::<6>($w, $($arg),*),
+            7 => $fixed::<7>($w, $($arg),*),
+            8 => $fixed::<8>($w, $($arg),*),
+            9 => $fixed::<9>($w, $($arg),*),
+            10 => $fixed::<10>($w, $($arg),*),
+            11 => $fixed::<11>($w, $($arg),*),
+            12 => $fixed::<12>($w, $($arg),*),
+            _ => $generic($w, $($arg),*),
+        }
+    };
+}
+
 /// Where each run of consecutive rows starts in the sorted `rows`.
 pub(crate) fn run_starts(rows: &[u32], starts: &mut Vec<u32>) {
     starts.clear();
@@ -100,15 +122,7 @@ fn rank_run_fixed<const K: usize>(w: &mut [&mut [f64]], first: usize, l: &mut [f
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 pub(crate) unsafe fn rank_run_fma(w: &mut [&mut [f64]], first: usize, l: &mut [f64], p: &[f64], g: &[f64]) {
-    macro_rules! fixed {
-        ($($k:literal)*) => {
-            match w.len() {
-                $($k => rank_run_fixed::<$k>(w, first, l, p, g),)*
-                _ => rank_run_generic(w, first, l, p, g),
-            }
-        };
-    }
-    fixed!(1 2 3 4 5 6 7 8 9 10 11 12)
+    by_rank!(rank_run_fixed, rank_run_generic, w, first, l, p, g)
 }
 
 /// One column step of a multiple-rank update over a column whose runs are
@@ -161,15 +175,7 @@ fn rank_rows_fixed<const K: usize>(w: &mut [&mut [f64]], rows: &[u32], l: &mut [
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 pub(crate) unsafe fn rank_rows_fma(w: &mut [&mut [f64]], rows: &[u32], l: &mut [f64], p: &[f64], g: &[f64]) {
-    macro_rules! fixed {
-        ($($k:literal)*) => {
-            match w.len() {
-                $($k => rank_rows_fixed::<$k>(w, rows, l, p, g),)*
-                _ => rank_rows_generic(w, rows, l, p, g),
-            }
-        };
-    }
-    fixed!(1 2 3 4 5 6 7 8 9 10 11 12)
+    by_rank!(rank_rows_fixed, rank_rows_generic, w, rows, l, p, g)
 }
 
 /// `c_r += y L_rj` over the rows of column `j`, by runs.
