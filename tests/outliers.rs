@@ -384,34 +384,40 @@ fn loosely_held_chain(wrong: &[Pose2]) -> Vec<f64> {
     let truth = |k: usize| Pose2::new(k as f64, 0.0, 0.0);
     let odometry = Information::from_upper([400.0, 0.0, 0.0, 400.0, 0.0, 131.312254]).unwrap();
     let closure = Information::from_upper([100.0, 0.0, 0.0, 100.0, 0.0, 131.312254]).unwrap();
+    let n = 200 + wrong.len();
+    let mut g = PoseGraph::default();
+    for id in 0..n as u64 {
+        g.add_keyframe(id, None).unwrap();
+    }
+    for k in 1..n {
+        let step = truth(k - 1).between(&truth(k));
+        g.add_edge(k as u64 - 1, k as u64, step, odometry, EdgeKind::Odometry)
+            .unwrap();
+        if k >= 200 {
+            let moved = wrong[k - 200].compose(&truth(200).inverse());
+            let z = truth(k - 200).between(&moved.compose(&truth(k)));
+            g.add_edge(k as u64 - 200, k as u64, z, closure, EdgeKind::LoopClosure)
+                .unwrap();
+        }
+    }
     let mut config = EngineConfig {
         nonlinear_ratio: 0.0,
         ..unscheduled()
     };
     config.outliers.drift_run = 0;
-    let mut engine = Engine::new(config);
-    let (mut switches, mut closures) = (Vec::new(), Vec::new());
-    for k in 0..200 + wrong.len() {
-        engine.add_keyframe(k as u64, None).unwrap();
-        if k > 0 {
-            let step = truth(k - 1).between(&truth(k));
-            let odo = EdgeInput::new(k as u64 - 1, k as u64, step, odometry, EdgeKind::Odometry);
-            engine.add_edge(odo).unwrap();
+    let mut switches = Vec::new();
+    let (engine, _) = slamd_tests::replay(&g, config, |k, engine| {
+        if k >= 200 {
+            // each keyframe from 200 on brings one loop closure, the newest
+            let edges = engine.graph().edges();
+            let e = edges.iter().rposition(|e| e.kind == EdgeKind::LoopClosure);
+            switches.push(engine.switches()[e.expect("its loop closure")]);
         }
-        let lc = (k >= 200).then(|| {
-            let moved = wrong[k - 200].compose(&truth(200).inverse());
-            let z = truth(k - 200).between(&moved.compose(&truth(k)));
-            let input = EdgeInput::new(k as u64 - 200, k as u64, z, closure, EdgeKind::LoopClosure);
-            engine.add_edge(input).unwrap()
-        });
-        engine.update();
-        if let Some(e) = lc {
-            switches.push(engine.switches()[e]);
-            closures.push(e);
-        }
-    }
+    });
     // and as they stand at the end
-    switches.extend(closures.iter().map(|&e| engine.switches()[e]));
+    let edges = engine.graph().edges();
+    let closures = (0..edges.len()).filter(|&e| edges[e].kind == EdgeKind::LoopClosure);
+    switches.extend(closures.map(|e| engine.switches()[e]));
     switches
 }
 

@@ -184,6 +184,7 @@ pub fn solve_batch(graph: &PoseGraph, options: &BatchOptions) -> Result<BatchSol
         let switchable: Vec<bool> = graph.edges().iter().map(|e| filter.switchable(e)).collect();
         let mut starts = vec![poses.clone()];
         starts.extend(odometry_chain(graph));
+        // a batch solve has the machine: the starts are probed two at a time
         let sol = robust_polish(graph.edges(), &switchable, starts, filter, options.lm, 2)?;
         let mut poses = sol.poses;
         if let Some(gps) = gps.filter(|g| g.absolute) {

@@ -625,6 +625,9 @@ impl Engine {
         true
     }
 
+    /// Rebuilds the state here, polished as `polish` says. Only a polish
+    /// restarts the re-solve schedule and the fill baseline; a
+    /// relinearisation or a recovery ([`Polish::None`]) leaves them.
     fn rebuild_inline(&mut self, polish: Polish) {
         let (model, start) = (self.state.model().clone(), self.state.estimate());
         match State::rebuild(model, start, polish, &self.config) {
