@@ -384,6 +384,9 @@ pub struct Outcome {
     pub enu: HashMap<KeyframeId, c64>,
     pub trace: Vec<(usize, f64)>,
     pub total_s: f64,
+    /// Of `total_s`, the seconds from the last keyframe's snapshot to the
+    /// closing estimate (the re-solve that ends the stream).
+    pub closing_s: f64,
     pub resolves: usize,
     pub poses: Vec<Pose2>,
     pub checked: Vec<(usize, Vec<Pose2>)>,
@@ -418,8 +421,10 @@ pub fn replay(
         progress(k);
     }
     latencies.extend(sink.drain()?);
+    let closing = Instant::now();
     let (by_id, resolves, ready) = sink.finish()?;
     let total_s = ready.duration_since(start).as_secs_f64();
+    let closing_s = ready.duration_since(closing).as_secs_f64();
     let enu = sink.enu()?;
     let switches = sink.switches().map(|sw| {
         let mut by_file = vec![1.0; graph.edges().len()];
@@ -446,6 +451,7 @@ pub fn replay(
         trace: latencies.clone(),
         latencies: latencies.into_iter().map(|(_, l)| l).collect(),
         total_s,
+        closing_s,
         resolves,
         poses,
         checked,
@@ -530,6 +536,7 @@ pub fn run(opts: ReplayOpts) -> anyhow::Result<()> {
             "p99_us": lat.p99,
             "max_us": lat.max,
             "total_s": out.total_s,
+            "closing_s": out.closing_s,
             "resolves": out.resolves,
             "chi2": final_chi2,
             "ate": ate,
@@ -557,8 +564,8 @@ pub fn run(opts: ReplayOpts) -> anyhow::Result<()> {
             lat.p50, lat.p99, lat.max
         );
         println!(
-            "total                 {:.3} s  ({} re-solves)",
-            out.total_s, out.resolves
+            "total                 {:.3} s  ({} re-solves; closing one {:.3} s)",
+            out.total_s, out.resolves, out.closing_s
         );
         println!("final chi2            {final_chi2:.3}");
         if let Some(a) = ate {
