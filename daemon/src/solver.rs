@@ -185,7 +185,7 @@ pub fn solve_batch(graph: &PoseGraph, options: &BatchOptions) -> Result<BatchSol
         let mut starts = vec![poses.clone()];
         starts.extend(odometry_chain(graph));
         // a batch solve has the machine: the starts are probed two at a time
-        let sol = robust_polish(graph.edges(), &switchable, starts, filter, options.lm, 2)?;
+        let sol = robust_polish(graph.edges(), &switchable, starts, filter, options.lm, 2, None)?;
         let mut poses = sol.poses;
         if let Some(gps) = gps.filter(|g| g.absolute) {
             let edges: Vec<Edge> = (graph.edges().iter().zip(&sol.switches))

@@ -339,7 +339,7 @@ impl Engine {
             // and City10000's run went on
             self.stats.drift_resolves += 1;
             tracing::debug!("Agreeing loop closures rejected on arrival; re-solving inline.");
-            moved = self.resolve_inline(false, Polish::Full);
+            moved = self.resolve_inline(Polish::Full);
             resolved = true;
         } else if self.beyond(self.config.nonlinear_ratio, 1.0) || self.relinearise(&mut moved) {
             self.stats.nonlinear_resolves += 1;
@@ -348,7 +348,7 @@ impl Engine {
                 predicted = self.state.predicted_chi2(),
                 "Linearisation failed; re-solving inline."
             );
-            moved = self.resolve_inline(false, Polish::Inline);
+            moved = self.resolve_inline(Polish::Inline);
             resolved = true;
         }
         self.forward_estimates();
@@ -378,10 +378,10 @@ impl Engine {
         self.job.is_some()
     }
 
-    /// Waits for any running re-solve, then re-solves inline over
-    /// everything: the polished estimate of the whole graph.
+    /// Re-solves inline over everything (abandoning a running re-solve):
+    /// the polished estimate of the whole graph.
     pub fn resolve_now(&mut self) -> UpdateReport {
-        let moved = self.resolve_inline(true, Polish::Closing);
+        let moved = self.resolve_inline(Polish::Closing);
         self.version += 1;
         UpdateReport {
             version: self.version,
@@ -441,29 +441,19 @@ impl Engine {
         }
     }
 
-    /// A full re-solve here. With `wait` (the closing one), a running
-    /// background re-solve is first waited for and swapped in; without (the
-    /// nonlinearity check's, [`Polish::Inline`]), it is abandoned (waiting
-    /// cost a keyframe 15-22 s on City10000 with 1000 outliers). A cheaper
-    /// relinearisation for the nonlinearity check, a few robust iterations
-    /// with the switches held, left 8-20 true loop closures of the test
-    /// world off in 3-15% of runs.
-    fn resolve_inline(&mut self, wait: bool, polish: Polish) -> usize {
-        match self.job.take() {
-            Some(job) if wait => {
-                if let Some(outcome) = job.finish() {
-                    self.swap_in(outcome);
-                }
-            }
-            Some(job) => {
-                // the re-solve below covers everything the running one
-                // does, and more; swapping the older one in afterwards
-                // would leave the newest edges unpolished with no re-solve
-                // due (the demo ended at χ² 6,900-8,700 instead of 2,374)
-                job.abandon();
-                self.log.clear();
-            }
-            None => {}
+    /// A full re-solve here. A running background re-solve is abandoned:
+    /// this one covers everything it does, and more. Swapping the older
+    /// one in afterwards would leave the newest edges unpolished with no
+    /// re-solve due (the demo ended at χ² 6,900-8,700 instead of 2,374);
+    /// waiting for it cost a keyframe 15-22 s on City10000 with 1000
+    /// outliers, and the closing re-solve (which waited until this stop)
+    /// 0.4 s of City10000's 0.76. A cheaper relinearisation for the
+    /// nonlinearity check, a few robust iterations with the switches held,
+    /// left 8-20 true loop closures of the test world off in 3-15% of runs.
+    fn resolve_inline(&mut self, polish: Polish) -> usize {
+        if let Some(job) = self.job.take() {
+            job.abandon();
+            self.log.clear();
         }
         // what the swapped-in state replayed is pending, and a rebuild
         // polishes only connected edges: connect them first (else the
@@ -569,8 +559,10 @@ impl Engine {
             self.job = Some(Job::spawn(model, estimate, self.config.clone(), polish));
         } else {
             let (_tx, rx) = crossbeam::channel::unbounded();
-            let outcome = resolve::run(model, &estimate, &self.config, polish, &rx);
-            self.swap_in(outcome);
+            let never = std::sync::atomic::AtomicBool::new(false);
+            if let Some(outcome) = resolve::run(model, &estimate, &self.config, polish, &rx, &never) {
+                self.swap_in(outcome);
+            }
         }
     }
 
@@ -674,7 +666,7 @@ fn retire(old: State) {
 impl Drop for Engine {
     fn drop(&mut self) {
         if let Some(job) = self.job.take() {
-            let _ = job.finish();
+            job.stop();
         }
     }
 }

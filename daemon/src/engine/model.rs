@@ -12,6 +12,7 @@ use crate::linear::two_stage;
 use crate::nonlinear::{polish, LevenbergMarquardtParams, PositionPrior, Problem};
 use crate::outliers::{robust_polish, OFF_BELOW};
 use std::collections::HashMap;
+use std::sync::atomic::AtomicBool;
 
 /// The graph and its bookkeeping, without the solvers.
 #[derive(Clone, Debug, Default)]
@@ -87,6 +88,17 @@ impl Model {
         (edges, ids)
     }
 
+    /// The joined keyframes (gauge first) and the compact index of every
+    /// keyframe among them (`usize::MAX` where not joined).
+    pub(super) fn compact_joined(&self) -> (Vec<usize>, Vec<usize>) {
+        let joined: Vec<usize> = (0..self.graph.len()).filter(|&k| self.joined[k]).collect();
+        let mut compact = vec![usize::MAX; self.graph.len()];
+        for (c, &k) in joined.iter().enumerate() {
+            compact[k] = c;
+        }
+        (joined, compact)
+    }
+
     /// The re-solve's polish ([`robust_polish`]). [`Polish::Full`] (and
     /// [`Polish::Closing`], two starts at a time) starts from the current
     /// estimate and from the two-stage solutions with and without the
@@ -95,7 +107,7 @@ impl Model {
     /// against an optimum of 24), and the two-stage solution does not
     /// depend on it. [`Polish::Inline`] starts from the estimate alone.
     /// Sets every switch from the result; returns the poses (compact
-    /// indices).
+    /// indices). Once `stop` is set the polish ends where it is.
     pub(super) fn robust_polish(
         &mut self,
         config: &EngineConfig,
@@ -103,6 +115,7 @@ impl Model {
         joined: &[usize],
         lin: &[Pose2],
         polish: Polish,
+        stop: &AtomicBool,
     ) -> Vec<Pose2> {
         let filter = &config.outliers;
         let (edges, ids) = self.compact_edges(compact, |m, e| m.scale[e]);
@@ -123,7 +136,15 @@ impl Model {
             }
         }
         let threads = if polish == Polish::Closing { 2 } else { 1 };
-        let Ok(solution) = robust_polish(&edges, &switchable, starts, filter, config.polish, threads) else {
+        let Ok(solution) = robust_polish(
+            &edges,
+            &switchable,
+            starts,
+            filter,
+            config.polish,
+            threads,
+            Some(stop),
+        ) else {
             return initial;
         };
         for (a, &e) in ids.iter().enumerate() {

@@ -18,6 +18,8 @@ use super::EngineConfig;
 use crate::geometry::Pose2;
 use crate::sparse::FactorError;
 use crossbeam::channel::{self, Receiver, Sender};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
 use std::thread::JoinHandle;
 use std::time::Instant;
 
@@ -46,6 +48,8 @@ pub struct Job {
     ops: Sender<Forward>,
     done: Receiver<Outcome>,
     handle: Option<JoinHandle<()>>,
+    /// Set when nobody waits for the outcome any more.
+    stop: Arc<AtomicBool>,
 }
 
 impl Job {
@@ -53,20 +57,24 @@ impl Job {
     pub fn spawn(model: Model, estimate: Vec<Pose2>, config: EngineConfig, polish: Polish) -> Job {
         let (ops, ops_rx) = channel::unbounded();
         let (done_tx, done) = channel::bounded(1);
+        let stop = Arc::new(AtomicBool::new(false));
+        let stopped = Arc::clone(&stop);
         let handle = std::thread::Builder::new()
             .name("slamd-resolve".into())
             .spawn(move || {
                 // the caller may be pinned to one core; a re-solve belongs on
                 // whichever core is free
                 crate::affinity::unpin_current_thread();
-                let outcome = run(model, &estimate, &config, polish, &ops_rx);
-                let _ = done_tx.send(outcome);
+                if let Some(outcome) = run(model, &estimate, &config, polish, &ops_rx, &stopped) {
+                    let _ = done_tx.send(outcome);
+                }
             })
             .expect("spawn the re-solve thread");
         Job {
             ops,
             done,
             handle: Some(handle),
+            stop,
         }
     }
 
@@ -87,17 +95,18 @@ impl Job {
         Some(outcome)
     }
 
-    /// Lets the re-solve run out on its own and drops its outcome (the
-    /// thread is detached; the closed channel ends its catching up).
-    pub fn abandon(mut self) {
-        self.handle.take();
-    }
+    /// Stops the re-solve where it is and drops its outcome without
+    /// waiting (as dropping the job does): its polish ends at the next
+    /// iteration, it skips the factorisation, and the closed channel ends
+    /// its catching up. Each of City10000's abandoned re-solves otherwise
+    /// held a core for up to half a second.
+    pub fn abandon(self) {}
 
-    /// Waits for the outcome.
-    pub fn finish(mut self) -> Option<Outcome> {
-        let outcome = self.done.recv().ok();
+    /// Stops the re-solve as [`Self::abandon`] does and waits for its
+    /// thread to end.
+    pub fn stop(mut self) {
+        self.stop.store(true, Ordering::Relaxed);
         self.join();
-        outcome
     }
 
     fn join(&mut self) {
@@ -107,21 +116,35 @@ impl Job {
     }
 }
 
+impl Drop for Job {
+    /// Stops a re-solve nobody will take (the thread is detached).
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+    }
+}
+
 /// Passes over the queued ops a re-solve makes before handing over.
 const CATCH_UP_PASSES: usize = 3;
 
 /// Builds the fresh state and catches up (also used inline, with no ops).
+/// `None` when `stop` was set before the factorisation.
 pub fn run(
-    model: Model,
+    mut model: Model,
     estimate: &[Pose2],
     config: &EngineConfig,
     polish: Polish,
     ops: &Receiver<Forward>,
-) -> Outcome {
+    stop: &AtomicBool,
+) -> Option<Outcome> {
     let start = Instant::now();
     let _span = tracing::debug_span!("resolve", keyframes = model.graph.len(), ?polish).entered();
     let joined = model.joined.clone();
-    let state = State::rebuild(model, estimate, polish, config);
+    let lin = State::polish_model(&mut model, estimate, polish, config, stop);
+    if stop.load(Ordering::Relaxed) {
+        tracing::debug!(seconds = start.elapsed().as_secs_f64(), "Re-solve stopped.");
+        return None;
+    }
+    let state = State::factorise(model, lin, config);
     let mut last_seq = None;
     let (built, mut replayed) = (start.elapsed().as_secs_f64(), 0);
     let state = state.map(|mut s| {
@@ -156,10 +179,10 @@ pub fn run(
     });
     let seconds = start.elapsed().as_secs_f64();
     tracing::debug!(seconds, built, replayed, "Re-solve finished.");
-    Outcome {
+    Some(Outcome {
         state,
         last_seq,
         seconds,
         polish,
-    }
+    })
 }

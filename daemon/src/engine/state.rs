@@ -16,6 +16,7 @@ use crate::graph::{edge_chi2, edge_error, Edge, EdgeKind, KeyframeId};
 use crate::outliers::{DriftRun, OutlierConfig, OFF_BELOW};
 use crate::sparse::ordering::amd_newest_last;
 use crate::sparse::FactorError;
+use std::sync::atomic::AtomicBool;
 
 /// The model plus the solvers and the cached χ².
 #[derive(Clone, Debug)]
@@ -649,25 +650,43 @@ impl State {
         polish: Polish,
         config: &EngineConfig,
     ) -> Result<State, FactorError> {
-        let (recent, source, linear) = (config.recent_last, config.snapshot, config.linear_stages);
+        let lin = Self::polish_model(&mut model, start, polish, config, &AtomicBool::new(false));
+        Self::factorise(model, lin, config)
+    }
+
+    /// The first half of [`Self::rebuild`]: unjoins what no weighted edge
+    /// holds and polishes `model` from `start` as `polish` says, setting
+    /// its switches and georeference; returns the linearisation point of
+    /// every keyframe. Once `stop` is set the polish ends where it is.
+    pub fn polish_model(
+        model: &mut Model,
+        start: &[Pose2],
+        polish: Polish,
+        config: &EngineConfig,
+        stop: &AtomicBool,
+    ) -> Vec<Pose2> {
         model.unjoin_unconstrained();
         let n = model.graph.len();
-        // compact index over joined keyframes (gauge first)
-        let joined: Vec<usize> = (0..n).filter(|&k| model.joined[k]).collect();
-        let mut compact = vec![usize::MAX; n];
-        for (c, &k) in joined.iter().enumerate() {
-            compact[k] = c;
-        }
         let mut lin = start.to_vec();
         lin.resize(n, Pose2::IDENTITY);
         if polish != Polish::None {
-            let mut poses = model.robust_polish(config, &compact, &joined, &lin, polish);
+            let (joined, compact) = model.compact_joined();
+            let mut poses = model.robust_polish(config, &compact, &joined, &lin, polish, stop);
             let (edges, _) = model.compact_edges(&compact, Model::weight);
             model.georeference(&config.gps, &edges, &compact, &mut poses, &config.polish);
             for (c, &k) in joined.iter().enumerate() {
                 lin[k] = poses[c];
             }
         }
+        lin
+    }
+
+    /// The second half of [`Self::rebuild`]: the fresh factor of `model`
+    /// linearised at `lin`.
+    pub fn factorise(mut model: Model, lin: Vec<Pose2>, config: &EngineConfig) -> Result<State, FactorError> {
+        let (recent, source, linear) = (config.recent_last, config.snapshot, config.linear_stages);
+        let n = model.graph.len();
+        let (joined, compact) = model.compact_joined();
         let active: Vec<(usize, f64)> = (0..model.graph.edges().len())
             .filter(|&e| model.applied[e] && model.weight(e) > 0.0)
             .map(|e| (e, model.weight(e)))

@@ -203,9 +203,10 @@ impl<'a> LevenbergMarquardt<'a> {
         it
     }
 
-    /// Iterates until converged or the iteration cap.
+    /// Iterates until converged, the iteration cap, or the problem's stop.
     pub fn optimize(mut self) -> Result<LmReport, FactorError> {
-        while !self.converged && self.iterations.len() < self.params.max_iterations {
+        while !self.converged && self.iterations.len() < self.params.max_iterations && !self.problem.stopped()
+        {
             self.iterate()?;
         }
         Ok(LmReport {

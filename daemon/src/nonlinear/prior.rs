@@ -7,6 +7,7 @@ use crate::graph::{chi2_of_edges, edge_chi2, Edge};
 use crate::outliers::Kernel;
 use faer::c64;
 use nalgebra::Matrix2;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 /// `p_k ≈ target` in the map frame with information Ω (a GPS fix carried
 /// into the map frame by the georeference). Its error `e = p_k − target`
@@ -50,6 +51,9 @@ pub struct Problem<'a> {
     pub priors: &'a [PositionPrior],
     /// Switchable edges, if any.
     pub robust: Option<Robust<'a>>,
+    /// Asked before every iteration: once set, the polish ends where it
+    /// is (a background re-solve nobody waits for any more).
+    pub stop: Option<&'a AtomicBool>,
 }
 
 impl<'a> Problem<'a> {
@@ -64,7 +68,13 @@ impl<'a> Problem<'a> {
             edges,
             priors,
             robust: None,
+            stop: None,
         }
+    }
+
+    /// Whether the polish was asked to stop.
+    pub fn stopped(&self) -> bool {
+        self.stop.is_some_and(|s| s.load(Ordering::Relaxed))
     }
 
     /// The total cost at `poses`.

@@ -6,6 +6,7 @@ use crate::geometry::Pose2;
 use crate::graph::Edge;
 use crate::nonlinear::{polish, LevenbergMarquardtParams, LmReport, Problem, Robust};
 use crate::sparse::FactorError;
+use std::sync::atomic::AtomicBool;
 use std::sync::{Mutex, OnceLock};
 
 /// What the robust polish found.
@@ -80,6 +81,7 @@ fn polish_awake(
                 switchable: &switchable,
                 ..robust
             }),
+            stop: problem.stop,
         };
         let left = params.max_iterations.saturating_sub(iterations.len());
         let Ok(r) = polish(
@@ -96,7 +98,7 @@ fn polish_awake(
         poses = r.poses;
         let converged = r.converged;
         let woke = wake(problem.edges, &robust, &poses, &mut awake);
-        if woke == 0 || iterations.len() >= params.max_iterations {
+        if woke == 0 || iterations.len() >= params.max_iterations || problem.stopped() {
             return Ok(LmReport {
                 final_chi2: problem.chi2(&poses),
                 poses,
@@ -157,7 +159,7 @@ fn probe_start(
         ..probe
     };
     let first = polish_awake(problem, start, look)?;
-    if first.converged || first.final_chi2 > ABANDON_RATIO * lowest() {
+    if first.converged || problem.stopped() || first.final_chi2 > ABANDON_RATIO * lowest() {
         return Ok(first);
     }
     let rest = LevenbergMarquardtParams {
@@ -244,8 +246,8 @@ impl Drop for Unblock<'_> {
 /// [`LOOK_ITERATIONS`]: [`ABANDON_RATIO`]), then to convergence unless its
 /// cost is past [`PRUNE_RATIO`] times the lowest; the lowest final cost
 /// gives the switches. The starts are probed `threads` at a time, with
-/// the same outcome. Fails when no start could be polished (or none was
-/// given).
+/// the same outcome. Once `stop` is set, every polish ends where it is.
+/// Fails when no start could be polished (or none was given).
 pub fn robust_polish(
     edges: &[Edge],
     switchable: &[bool],
@@ -253,6 +255,7 @@ pub fn robust_polish(
     config: &OutlierConfig,
     params: LevenbergMarquardtParams,
     threads: usize,
+    stop: Option<&AtomicBool>,
 ) -> Result<RobustSolution, FactorError> {
     let n = starts.first().map_or(0, Vec::len);
     let mut out = vec![false; edges.len()];
@@ -273,6 +276,7 @@ pub fn robust_polish(
             kernel: config.kernel,
             switchable: &kept_switchable,
         }),
+        stop,
     };
     // every start gets a probe of a few iterations; those within
     // `PRUNE_RATIO` of the lowest cost go on to convergence (a start in a
@@ -294,7 +298,7 @@ pub fn robust_polish(
     let mut best: Option<LmReport> = None;
     for r in probed {
         let spent = r.iterations.len() >= params.max_iterations;
-        let r = if r.converged || spent || r.final_chi2 > PRUNE_RATIO * lowest {
+        let r = if r.converged || spent || problem.stopped() || r.final_chi2 > PRUNE_RATIO * lowest {
             r
         } else {
             let rest = LevenbergMarquardtParams {
@@ -396,12 +400,13 @@ mod tests {
         );
         assert!(config.kernel.switch(closure, &start[7], &start[0]) < DORMANT_BELOW);
         let params = LevenbergMarquardtParams::default();
-        let got = robust_polish(&edges, &switchable, vec![start.clone()], &config, params, 1).unwrap();
+        let got = robust_polish(&edges, &switchable, vec![start.clone()], &config, params, 1, None).unwrap();
         // the reference: every edge in every linear system
         let problem = Problem {
             edges: &edges,
             priors: &[],
             robust: Some(robust),
+            stop: None,
         };
         let want = polish(problem, start, params).unwrap();
         assert!(got.switches[7] > 0.99, "switch {}", got.switches[7]);
@@ -425,6 +430,7 @@ mod tests {
             edges: &edges,
             priors: &[],
             robust: None,
+            stop: None,
         };
         // every pose thrown off, turned and shuffled: far from any basin
         let start: Vec<Pose2> = (0..8)
@@ -472,6 +478,40 @@ mod tests {
             assert_eq!(a.final_chi2, b.final_chi2);
             assert_eq!(a.poses, b.poses);
         }
+    }
+
+    #[test]
+    fn a_stopped_polish_ends_where_it_is() {
+        let edges = square();
+        let switchable: Vec<bool> = edges.iter().map(|e| e.kind == EdgeKind::LoopClosure).collect();
+        let start = square_start(&edges);
+        let (config, params) = (OutlierConfig::default(), LevenbergMarquardtParams::default());
+        let stop = AtomicBool::new(true);
+        let stopped = robust_polish(
+            &edges,
+            &switchable,
+            vec![start.clone()],
+            &config,
+            params,
+            1,
+            Some(&stop),
+        )
+        .unwrap();
+        assert_eq!(stopped.poses, start);
+        // not stopped, the same call moves the map
+        stop.store(false, std::sync::atomic::Ordering::Relaxed);
+        let done = robust_polish(
+            &edges,
+            &switchable,
+            vec![start.clone()],
+            &config,
+            params,
+            1,
+            Some(&stop),
+        )
+        .unwrap();
+        assert!((done.poses[7].theta - start[7].theta).abs() > 1e-3);
+        assert!(done.cost < stopped.cost, "{} vs {}", done.cost, stopped.cost);
     }
 
     /// Odometry composed from the origin.
