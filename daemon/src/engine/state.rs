@@ -671,7 +671,9 @@ impl State {
         lin.resize(n, Pose2::IDENTITY);
         if polish != Polish::None {
             let (joined, compact) = model.compact_joined();
+            let started = std::time::Instant::now();
             let mut poses = model.robust_polish(config, &compact, &joined, &lin, polish, stop);
+            tracing::debug!(seconds = started.elapsed().as_secs_f64(), ?polish, "Polished.");
             let (edges, _) = model.compact_edges(&compact, Model::weight);
             model.georeference(&config.gps, &edges, &compact, &mut poses, &config.polish);
             for (c, &k) in joined.iter().enumerate() {
