@@ -339,7 +339,7 @@ impl Engine {
             // and City10000's run went on
             self.stats.drift_resolves += 1;
             tracing::debug!("Agreeing loop closures rejected on arrival; re-solving inline.");
-            moved = self.resolve_inline(Polish::Full);
+            moved = self.resolve_inline(Polish::FullInline);
             resolved = true;
         } else if self.beyond(self.config.nonlinear_ratio, 1.0) || self.relinearise(&mut moved) {
             self.stats.nonlinear_resolves += 1;
@@ -381,7 +381,7 @@ impl Engine {
     /// Re-solves inline over everything (abandoning a running re-solve):
     /// the polished estimate of the whole graph.
     pub fn resolve_now(&mut self) -> UpdateReport {
-        let moved = self.resolve_inline(Polish::Closing);
+        let moved = self.resolve_inline(Polish::FullInline);
         self.version += 1;
         UpdateReport {
             version: self.version,

@@ -100,7 +100,7 @@ impl Model {
     }
 
     /// The re-solve's polish ([`robust_polish`]). [`Polish::Full`] (and
-    /// [`Polish::Closing`], two starts at a time) starts from the current
+    /// [`Polish::FullInline`], two starts at a time) starts from the current
     /// estimate and from the two-stage solutions with and without the
     /// switches: after a large loop closure the estimate can sit in the
     /// wrong basin (Manhattan's first re-solve reached χ² 50 from it
@@ -125,7 +125,7 @@ impl Model {
             .collect();
         let initial: Vec<Pose2> = joined.iter().map(|&k| lin[k]).collect();
         let mut starts = vec![initial.clone()];
-        if matches!(polish, Polish::Full | Polish::Closing) {
+        if matches!(polish, Polish::Full | Polish::FullInline) {
             // the two-stage solution under the current switches, and (when
             // some are below 1) under none: a loop closure switched off on
             // arrival against a drifted estimate must get a start that does
@@ -135,7 +135,7 @@ impl Model {
                 starts.extend(self.linear_start(compact, joined, initial[0], |m, e| m.scale[e]));
             }
         }
-        let threads = if polish == Polish::Closing { 2 } else { 1 };
+        let threads = if polish == Polish::FullInline { 2 } else { 1 };
         let Ok(solution) = robust_polish(
             &edges,
             &switchable,

@@ -37,9 +37,10 @@ pub enum Polish {
     /// The re-solve's: the robust multi-start polish that sets the outlier
     /// filter's switches, then the georeference.
     Full,
-    /// [`Polish::Full`] with nothing else running (the re-solve that ends
-    /// a stream): its starts are probed two at a time.
-    Closing,
+    /// [`Polish::Full`] in the foreground, with any background re-solve
+    /// stopped (the drift check's and the one that ends a stream): its
+    /// starts are probed two at a time, with the outcome of one at a time.
+    FullInline,
     /// The nonlinearity check's inline re-solve: the robust polish from
     /// the current estimate alone; the next background re-solve has the
     /// two-stage starts. The start that rescues loop closures switched off
