@@ -487,29 +487,15 @@ mod tests {
         let start = square_start(&edges);
         let (config, params) = (OutlierConfig::default(), LevenbergMarquardtParams::default());
         let stop = AtomicBool::new(true);
-        let stopped = robust_polish(
-            &edges,
-            &switchable,
-            vec![start.clone()],
-            &config,
-            params,
-            1,
-            Some(&stop),
-        )
-        .unwrap();
+        let polish = || {
+            let starts = vec![start.clone()];
+            robust_polish(&edges, &switchable, starts, &config, params, 1, Some(&stop)).unwrap()
+        };
+        let stopped = polish();
         assert_eq!(stopped.poses, start);
         // not stopped, the same call moves the map
         stop.store(false, std::sync::atomic::Ordering::Relaxed);
-        let done = robust_polish(
-            &edges,
-            &switchable,
-            vec![start.clone()],
-            &config,
-            params,
-            1,
-            Some(&stop),
-        )
-        .unwrap();
+        let done = polish();
         assert!((done.poses[7].theta - start[7].theta).abs() > 1e-3);
         assert!(done.cost < stopped.cost, "{} vs {}", done.cost, stopped.cost);
     }
