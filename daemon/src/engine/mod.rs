@@ -381,7 +381,7 @@ impl Engine {
     /// Re-solves inline over everything (abandoning a running re-solve):
     /// the polished estimate of the whole graph.
     pub fn resolve_now(&mut self) -> UpdateReport {
-        let moved = self.resolve_inline(Polish::FullInline);
+        let moved = self.resolve_inline(Polish::Closing);
         self.version += 1;
         UpdateReport {
             version: self.version,

@@ -38,9 +38,13 @@ pub enum Polish {
     /// filter's switches, then the georeference.
     Full,
     /// [`Polish::Full`] in the foreground, with any background re-solve
-    /// stopped (the drift check's and the one that ends a stream): its
-    /// starts are probed two at a time, with the outcome of one at a time.
+    /// stopped (the drift check's): its starts are probed two at a time,
+    /// with the outcome of one at a time.
     FullInline,
+    /// [`Polish::FullInline`] at the end of a stream, with one more start:
+    /// the two-stage solution without the loop closures let in on arrival
+    /// since the last multi-start re-solve.
+    Closing,
     /// The nonlinearity check's inline re-solve: the robust polish from
     /// the current estimate alone; the next background re-solve has the
     /// two-stage starts. The start that rescues loop closures switched off

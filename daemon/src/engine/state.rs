@@ -180,6 +180,7 @@ impl State {
                 )?;
                 self.model.scale.push(1.0);
                 self.model.switch.push(1.0);
+                self.model.admitted.push(false);
                 self.model.applied.push(false);
                 self.edge_chi2.push(0.0);
                 self.model.pending.push(e);
@@ -296,7 +297,9 @@ impl State {
                     // a new loop closure between mapped keyframes enters
                     // with the switch its error has now
                     if self.outliers.switchable(&edge) {
-                        self.model.switch[e] = self.arrival_switch(e, &edge)?;
+                        let s = self.arrival_switch(e, &edge)?;
+                        self.model.switch[e] = s;
+                        self.model.admitted[e] |= s >= OFF_BELOW;
                     }
                     wait = self.may_wait(e);
                 }
@@ -410,6 +413,7 @@ impl State {
                 if m != e {
                     self.restore(m)?;
                 }
+                self.model.admitted[m] = true;
             }
             return Ok(1.0);
         }
@@ -801,5 +805,42 @@ mod tests {
         hinted.join_pending().unwrap();
         let k2 = hinted.estimate()[2];
         assert!(close(hinted.estimate()[3], k2.compose(&step)));
+    }
+
+    /// A loop closure let in on arrival is marked until a multi-start
+    /// re-solve has judged it (the closing one gets a start without the
+    /// marked ones); one turned away on arrival is not marked.
+    #[test]
+    fn loop_closures_let_in_on_arrival_are_marked_until_a_full_resolve() {
+        let config = EngineConfig::default();
+        let step = Pose2::new(1.0, 0.0, 0.0);
+        let mut state = State::new(&config);
+        for k in 0..6 {
+            state.replay(&keyframe(k), 0.0).unwrap();
+            if k > 0 {
+                state.replay(&odometry(k - 1, k, step), 0.0).unwrap();
+            }
+        }
+        let closure = |z: Pose2| {
+            Op::Edge(EdgeInput::new(
+                0,
+                5,
+                z,
+                Information::identity(),
+                EdgeKind::LoopClosure,
+            ))
+        };
+        state.replay(&closure(Pose2::new(5.0, 0.0, 0.0)), 0.0).unwrap();
+        state.replay(&closure(Pose2::new(-40.0, 30.0, 2.0)), 0.0).unwrap();
+        state.solve(0.0).unwrap();
+        let (agreeing, wrong) = (5, 6);
+        assert!(state.model.switch[agreeing] >= OFF_BELOW && state.model.admitted[agreeing]);
+        assert!(state.model.switch[wrong] < OFF_BELOW && !state.model.admitted[wrong]);
+        // a relinearisation is no judgement; a multi-start re-solve is
+        let estimate = state.estimate().to_vec();
+        let relinearised = State::rebuild(state.model.clone(), &estimate, Polish::None, &config).unwrap();
+        assert!(relinearised.model.admitted[agreeing]);
+        let resolved = State::rebuild(state.model.clone(), &estimate, Polish::Full, &config).unwrap();
+        assert!(!resolved.model.admitted.iter().any(|&a| a));
     }
 }
