@@ -446,8 +446,8 @@ impl Engine {
     /// one in afterwards would leave the newest edges unpolished with no
     /// re-solve due (the demo ended at χ² 6,900-8,700 instead of 2,374);
     /// waiting for it cost a keyframe 15-22 s on City10000 with 1000
-    /// outliers, and the closing re-solve (which waited until this stop)
-    /// 0.4 s of City10000's 0.76. A cheaper relinearisation for the
+    /// outliers, and the closing re-solve, when it waited, 0.4 s of
+    /// City10000's 0.76. A cheaper relinearisation for the
     /// nonlinearity check, a few robust iterations with the switches held,
     /// left 8-20 true loop closures of the test world off in 3-15% of runs.
     fn resolve_inline(&mut self, polish: Polish) -> usize {

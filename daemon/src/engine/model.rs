@@ -104,8 +104,8 @@ impl Model {
     }
 
     /// The re-solve's polish ([`robust_polish`]). [`Polish::Full`] (and
-    /// [`Polish::FullInline`] and [`Polish::Closing`], two starts at a time) starts from the current
-    /// estimate and from the two-stage solutions with and without the
+    /// [`Polish::FullInline`] and [`Polish::Closing`], two starts at a
+    /// time) starts from the current estimate and from the two-stage solutions with and without the
     /// switches: after a large loop closure the estimate can sit in the
     /// wrong basin (Manhattan's first re-solve reached χ² 50 from it
     /// against an optimum of 24), and the two-stage solution does not

@@ -661,7 +661,8 @@ impl State {
     /// The first half of [`Self::rebuild`]: unjoins what no weighted edge
     /// holds and polishes `model` from `start` as `polish` says, setting
     /// its switches and georeference; returns the linearisation point of
-    /// every keyframe. Once `stop` is set the polish ends where it is.
+    /// every keyframe. Once `stop` is set the polish ends where it is and
+    /// the georeference is left as it was.
     pub fn polish_model(
         model: &mut Model,
         start: &[Pose2],
@@ -678,8 +679,10 @@ impl State {
             let started = std::time::Instant::now();
             let mut poses = model.robust_polish(config, &compact, &joined, &lin, polish, stop);
             tracing::debug!(seconds = started.elapsed().as_secs_f64(), ?polish, "Polished.");
-            let (edges, _) = model.compact_edges(&compact, Model::weight);
-            model.georeference(&config.gps, &edges, &compact, &mut poses, &config.polish);
+            if !stop.load(std::sync::atomic::Ordering::Relaxed) {
+                let (edges, _) = model.compact_edges(&compact, Model::weight);
+                model.georeference(&config.gps, &edges, &compact, &mut poses, &config.polish);
+            }
             for (c, &k) in joined.iter().enumerate() {
                 lin[k] = poses[c];
             }
