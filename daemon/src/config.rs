@@ -39,6 +39,7 @@
 //! [engine.outliers]            # see slamd::outliers::OutlierConfig
 //! drift_run = 20               # agreeing rejections in a row that mean drift: re-solve
 //! arrival_covariance = true    # a loop closure the gate turns away is tried against the map's uncertainty
+//! unadmitted_start = false     # every re-solve (not only the closing one) also starts without the loop closures let in on arrival
 //! ```
 
 use crate::engine::EngineConfig;
@@ -48,6 +49,10 @@ use slamd_protocol::service::{Qos, DEFAULT_NAMESPACE};
 use std::fmt;
 use std::path::Path;
 use std::time::Duration;
+
+/// The environment variable that names the configuration file (the
+/// commands' `--config`).
+pub const FILE_VARIABLE: &str = "SLAMD_CONFIG";
 
 /// Why the configuration cannot be used.
 #[derive(Debug)]
@@ -167,6 +172,16 @@ impl Config {
     /// Defaults, overridden by `file` (TOML) if given, then by `SLAMD_*`
     /// environment variables; validated.
     pub fn load(file: Option<&Path>) -> Result<Config, ConfigError> {
+        Self::load_with_env(file, std::env::vars())
+    }
+
+    /// [`Self::load`] with the environment given. `SLAMD_CONFIG` names the
+    /// file (the command line reads it), so it is not a setting.
+    fn load_with_env(
+        file: Option<&Path>,
+        env: impl IntoIterator<Item = (String, String)>,
+    ) -> Result<Config, ConfigError> {
+        let env: config::Map<String, String> = env.into_iter().filter(|(k, _)| k != FILE_VARIABLE).collect();
         let err = |e: config::ConfigError| ConfigError(e.to_string());
         let mut builder =
             config::Config::builder().add_source(config::Config::try_from(&Config::default()).map_err(err)?);
@@ -180,7 +195,8 @@ impl Config {
             config::Environment::with_prefix("SLAMD")
                 .prefix_separator("_")
                 .separator("__")
-                .try_parsing(true),
+                .try_parsing(true)
+                .source(Some(env)),
         );
         let c: Config = builder.build().map_err(err)?.try_deserialize().map_err(err)?;
         c.validate()?;
@@ -265,6 +281,21 @@ impl Config {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `SLAMD_CONFIG` (the file's path, for `--config`) was read as a
+    /// setting named `config` and refused as unknown.
+    #[test]
+    fn the_file_variable_is_not_a_setting() {
+        let env = [
+            (FILE_VARIABLE.to_string(), "/nowhere/slamd.toml".to_string()),
+            ("SLAMD_ENGINE__RESOLVE_EVERY_EDGES".to_string(), "7".to_string()),
+        ];
+        let c = Config::load_with_env(None, env).unwrap();
+        assert_eq!(c.engine.resolve_every_edges, 7);
+        let unknown = [("SLAMD_NO_SUCH_SETTING".to_string(), "1".to_string())];
+        let e = Config::load_with_env(None, unknown).unwrap_err().to_string();
+        assert!(e.contains("no_such_setting"), "{e}");
+    }
 
     #[test]
     fn file_then_environment_override_defaults() {

@@ -42,7 +42,7 @@ pub struct ReplayOpts {
     #[arg(long, default_value_t = 0)]
     pub check_prefixes: usize,
     /// TOML configuration (namespace, and the engine for --embedded).
-    #[arg(long, env = "SLAMD_CONFIG")]
+    #[arg(long, env = slamd::config::FILE_VARIABLE)]
     pub config: Option<PathBuf>,
     /// Namespace of the daemon (overrides the configuration).
     #[arg(long)]

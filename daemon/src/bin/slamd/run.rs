@@ -7,7 +7,7 @@ use std::path::PathBuf;
 #[derive(Args, Debug)]
 pub struct RunOpts {
     /// TOML configuration (SLAMD_* environment variables override it).
-    #[arg(long, env = "SLAMD_CONFIG")]
+    #[arg(long, env = slamd::config::FILE_VARIABLE)]
     pub config: Option<PathBuf>,
     /// Serve this namespace instead of the configured one.
     #[arg(long)]
