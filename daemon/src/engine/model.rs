@@ -105,11 +105,13 @@ impl Model {
 
     /// The re-solve's polish ([`robust_polish`]). [`Polish::Full`] (and
     /// [`Polish::FullInline`] and [`Polish::Closing`], two starts at a
-    /// time) starts from the current estimate and from the two-stage solutions with and without the
-    /// switches: after a large loop closure the estimate can sit in the
-    /// wrong basin (Manhattan's first re-solve reached χ² 50 from it
-    /// against an optimum of 24), and the two-stage solution does not
-    /// depend on it. [`Polish::Inline`] starts from the estimate alone.
+    /// time) starts from the current estimate and from the two-stage
+    /// solutions with and without the switches: after a large loop closure
+    /// the estimate can sit in the wrong basin (Manhattan's first re-solve
+    /// reached χ² 50 from it against an optimum of 24), and the two-stage
+    /// solution does not depend on it ([`Self::starts`]; the closing one
+    /// also without the loop closures let in on arrival). [`Polish::Inline`]
+    /// starts from the estimate alone.
     /// Sets every switch from the result; returns the poses (compact
     /// indices). Once `stop` is set the polish ends where it is.
     pub(super) fn robust_polish(
@@ -128,27 +130,7 @@ impl Model {
             .map(|&e| filter.switchable(&self.graph.edges()[e]))
             .collect();
         let initial: Vec<Pose2> = joined.iter().map(|&k| lin[k]).collect();
-        let mut starts = vec![initial.clone()];
-        if matches!(polish, Polish::Full | Polish::FullInline | Polish::Closing) {
-            // the two-stage solution under the current switches, and (when
-            // some are below 1) under none: a loop closure switched off on
-            // arrival against a drifted estimate must get a start that does
-            // not already exclude it (W10000 otherwise lost 13,000 true ones)
-            starts.extend(self.linear_start(compact, joined, initial[0], Model::weight));
-            if ids.iter().any(|&e| self.switch[e] < 1.0) {
-                starts.extend(self.linear_start(compact, joined, initial[0], |m, e| m.scale[e]));
-            }
-            // and, closing, without the loop closures let in on arrival
-            // since the last of these re-solves: a group of agreeing wrong
-            // ones can meet a map bent by the ones before it (Intel + 1000
-            // random-grouped: group 86's ten entered and held 35 true ones
-            // off in 5 runs of 6, every start ending in that basin). In
-            // every re-solve it cost City10000 + 1000 random 47%
-            if polish == Polish::Closing && ids.iter().any(|&e| self.admitted[e]) {
-                let unadmitted = |m: &Model, e: usize| if m.admitted[e] { 0.0 } else { m.weight(e) };
-                starts.extend(self.linear_start(compact, joined, initial[0], unadmitted));
-            }
-        }
+        let starts = self.starts(config, compact, joined, &initial, &ids, polish);
         let threads = if matches!(polish, Polish::FullInline | Polish::Closing) {
             2
         } else {
@@ -172,6 +154,43 @@ impl Model {
             self.admitted.fill(false);
         }
         solution.poses
+    }
+
+    /// The starts of [`Self::robust_polish`] (`ids`: the graph indices of
+    /// the edges it polishes): the estimate `initial` (compact), then, for a
+    /// multi-start polish, the two-stage solutions described inline.
+    pub(super) fn starts(
+        &self,
+        config: &EngineConfig,
+        compact: &[usize],
+        joined: &[usize],
+        initial: &[Pose2],
+        ids: &[usize],
+        polish: Polish,
+    ) -> Vec<Vec<Pose2>> {
+        let mut starts = vec![initial.to_vec()];
+        if matches!(polish, Polish::Full | Polish::FullInline | Polish::Closing) {
+            // the two-stage solution under the current switches, and (when
+            // some are below 1) under none: a loop closure switched off on
+            // arrival against a drifted estimate must get a start that does
+            // not already exclude it (W10000 otherwise lost 13,000 true ones)
+            starts.extend(self.linear_start(compact, joined, initial[0], Model::weight));
+            if ids.iter().any(|&e| self.switch[e] < 1.0) {
+                starts.extend(self.linear_start(compact, joined, initial[0], |m, e| m.scale[e]));
+            }
+            // and, closing (or always, `unadmitted_start`), without the
+            // loop closures let in on arrival since the last of these
+            // re-solves: a group of agreeing wrong ones can meet a map bent
+            // by the ones before it (Intel + 1000 random-grouped: group
+            // 86's ten entered and held 35 true ones off in 5 runs of 6,
+            // every start ending in that basin)
+            let unadmitted_due = polish == Polish::Closing || config.outliers.unadmitted_start;
+            if unadmitted_due && ids.iter().any(|&e| self.admitted[e]) {
+                let unadmitted = |m: &Model, e: usize| if m.admitted[e] { 0.0 } else { m.weight(e) };
+                starts.extend(self.linear_start(compact, joined, initial[0], unadmitted));
+            }
+        }
+        starts
     }
 
     /// The two-stage solution over the joined keyframes with each edge's

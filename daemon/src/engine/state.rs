@@ -846,4 +846,55 @@ mod tests {
         let resolved = State::rebuild(state.model.clone(), &estimate, Polish::Full, &config).unwrap();
         assert!(!resolved.model.admitted.iter().any(|&a| a));
     }
+
+    /// The start without the loop closures let in on arrival: the closing
+    /// re-solve's always, every multi-start re-solve's with
+    /// `unadmitted_start`, the inline polish's never.
+    #[test]
+    fn the_start_without_admitted_loop_closures_goes_where_configured() {
+        let config = EngineConfig::default();
+        let step = Pose2::new(1.0, 0.0, 0.0);
+        let mut state = State::new(&config);
+        for k in 0..6 {
+            state.replay(&keyframe(k), 0.0).unwrap();
+            if k > 0 {
+                state.replay(&odometry(k - 1, k, step), 0.0).unwrap();
+            }
+        }
+        // one loop closure that pulls keyframe 5 by 0.3 m (let in), one
+        // far off (turned away)
+        for z in [Pose2::new(5.3, 0.0, 0.0), Pose2::new(-40.0, 30.0, 2.0)] {
+            let closure = EdgeInput::new(0, 5, z, Information::identity(), EdgeKind::LoopClosure);
+            state.replay(&Op::Edge(closure), 0.0).unwrap();
+        }
+        state.solve(0.0).unwrap();
+        assert!(state.model.admitted[5] && !state.model.admitted[6]);
+        let (joined, compact) = state.model.compact_joined();
+        let (_, ids) = state.model.compact_edges(&compact, |m, e| m.scale[e]);
+        let initial: Vec<Pose2> = joined.iter().map(|&k| state.estimate()[k]).collect();
+        let starts = |config: &EngineConfig, polish| {
+            state
+                .model
+                .starts(config, &compact, &joined, &initial, &ids, polish)
+        };
+        let always = EngineConfig {
+            outliers: OutlierConfig {
+                unadmitted_start: true,
+                ..config.outliers
+            },
+            ..config.clone()
+        };
+        // the estimate, the two-stage solution under the switches, under none
+        assert_eq!(starts(&config, Polish::Full).len(), 3);
+        assert_eq!(starts(&config, Polish::Inline).len(), 1);
+        assert_eq!(starts(&always, Polish::Inline).len(), 1);
+        for (config, polish) in [(&config, Polish::Closing), (&always, Polish::Full)] {
+            let s = starts(config, polish);
+            assert_eq!(s.len(), 4);
+            // under the switches keyframe 5 is pulled toward 5.3; without
+            // the loop closure let in, odometry alone puts it at 5
+            assert!(s[1][5].x > 5.1, "{:?}", s[1][5]);
+            assert!((s[3][5].x - 5.0).abs() < 1e-9, "{:?}", s[3][5]);
+        }
+    }
 }
