@@ -810,32 +810,33 @@ mod tests {
         assert!(close(hinted.estimate()[3], k2.compose(&step)));
     }
 
-    /// A loop closure let in on arrival is marked until a multi-start
-    /// re-solve has judged it (the closing one gets a start without the
-    /// marked ones); one turned away on arrival is not marked.
-    #[test]
-    fn loop_closures_let_in_on_arrival_are_marked_until_a_full_resolve() {
-        let config = EngineConfig::default();
+    /// Six keyframes 1 m apart along x, then two loop closures from 0 to
+    /// 5 (edges 5 and 6): one `x` metres long (let in on arrival when near
+    /// 5) and one far off (turned away); solved.
+    fn line_closed(config: &EngineConfig, x: f64) -> State {
         let step = Pose2::new(1.0, 0.0, 0.0);
-        let mut state = State::new(&config);
+        let mut state = State::new(config);
         for k in 0..6 {
             state.replay(&keyframe(k), 0.0).unwrap();
             if k > 0 {
                 state.replay(&odometry(k - 1, k, step), 0.0).unwrap();
             }
         }
-        let closure = |z: Pose2| {
-            Op::Edge(EdgeInput::new(
-                0,
-                5,
-                z,
-                Information::identity(),
-                EdgeKind::LoopClosure,
-            ))
-        };
-        state.replay(&closure(Pose2::new(5.0, 0.0, 0.0)), 0.0).unwrap();
-        state.replay(&closure(Pose2::new(-40.0, 30.0, 2.0)), 0.0).unwrap();
+        for z in [Pose2::new(x, 0.0, 0.0), Pose2::new(-40.0, 30.0, 2.0)] {
+            let closure = EdgeInput::new(0, 5, z, Information::identity(), EdgeKind::LoopClosure);
+            state.replay(&Op::Edge(closure), 0.0).unwrap();
+        }
         state.solve(0.0).unwrap();
+        state
+    }
+
+    /// A loop closure let in on arrival is marked until a multi-start
+    /// re-solve has judged it (the closing one gets a start without the
+    /// marked ones); one turned away on arrival is not marked.
+    #[test]
+    fn loop_closures_let_in_on_arrival_are_marked_until_a_full_resolve() {
+        let config = EngineConfig::default();
+        let state = line_closed(&config, 5.0);
         let (agreeing, wrong) = (5, 6);
         assert!(state.model.switch[agreeing] >= OFF_BELOW && state.model.admitted[agreeing]);
         assert!(state.model.switch[wrong] < OFF_BELOW && !state.model.admitted[wrong]);
@@ -853,21 +854,8 @@ mod tests {
     #[test]
     fn the_start_without_admitted_loop_closures_goes_where_configured() {
         let config = EngineConfig::default();
-        let step = Pose2::new(1.0, 0.0, 0.0);
-        let mut state = State::new(&config);
-        for k in 0..6 {
-            state.replay(&keyframe(k), 0.0).unwrap();
-            if k > 0 {
-                state.replay(&odometry(k - 1, k, step), 0.0).unwrap();
-            }
-        }
-        // one loop closure that pulls keyframe 5 by 0.3 m (let in), one
-        // far off (turned away)
-        for z in [Pose2::new(5.3, 0.0, 0.0), Pose2::new(-40.0, 30.0, 2.0)] {
-            let closure = EdgeInput::new(0, 5, z, Information::identity(), EdgeKind::LoopClosure);
-            state.replay(&Op::Edge(closure), 0.0).unwrap();
-        }
-        state.solve(0.0).unwrap();
+        // the loop closure let in pulls keyframe 5 by 0.3 m
+        let state = line_closed(&config, 5.3);
         assert!(state.model.admitted[5] && !state.model.admitted[6]);
         let (joined, compact) = state.model.compact_joined();
         let (_, ids) = state.model.compact_edges(&compact, |m, e| m.scale[e]);
