@@ -16,9 +16,9 @@
 
 use super::factor::DynamicLdlt;
 use super::runs::gather_dot;
+use super::solve::wildfire;
 use super::update::UpdateError;
 use crate::sparse::Scalar;
-use std::collections::BinaryHeap;
 
 /// An augmented dynamic factor and the solution it gives.
 #[derive(Clone, Debug)]
@@ -144,55 +144,42 @@ impl<T: Scalar> AugmentedCholesky<T> {
         }
         self.solved.solves += 1;
         self.solved.touched += self.touched_list.len() as u64;
-        let mut heap: BinaryHeap<usize> = BinaryHeap::with_capacity(self.touched_list.len());
         for &j in &self.touched_list {
             self.touched[j] = false;
-            self.queued[j] = true;
-            heap.push(j);
         }
+        let (factor, solved) = (&self.factor, &mut self.solved);
+        wildfire(
+            factor,
+            &self.touched_list,
+            threshold,
+            (&mut self.x, &mut self.queued, &mut self.changed),
+            |j, x| {
+                solved.visited += 1;
+                solved.entries += factor.column(j).0.len() as u64;
+                back_substitute(factor, x, j)
+            },
+        );
         self.touched_list.clear();
-        self.changed.clear();
-        let tau2 = threshold * threshold;
-        while let Some(j) = heap.pop() {
-            self.queued[j] = false;
-            self.solved.visited += 1;
-            self.solved.entries += self.factor.column(j).0.len() as u64;
-            let new = self.back_substitute(j);
-            let delta = (new - self.x[j]).abs2();
-            if delta > 0.0 {
-                self.changed.push(j);
-            }
-            self.x[j] = new;
-            if delta > tau2 || threshold == 0.0 {
-                for &ch in self.factor.children(j) {
-                    let ch = ch as usize;
-                    if !self.queued[ch] {
-                        self.queued[ch] = true;
-                        heap.push(ch);
-                    }
-                }
-            }
-        }
         &self.changed
-    }
-
-    /// `x_j = z_j − Σ_i conj(L_ij) x_i`; an unconstrained variable (`d_j =
-    /// 0`) stays at 0.
-    fn back_substitute(&self, j: usize) -> T {
-        if self.factor.d(j) <= 0.0 {
-            return T::default();
-        }
-        self.factor.augmented_row()[j] - gather_dot(&self.x, self.factor.column_runs(j))
     }
 
     /// Recomputes `x` from `z` everywhere.
     pub fn solve_full(&mut self) {
         for j in (0..self.len()).rev() {
-            self.x[j] = self.back_substitute(j);
+            self.x[j] = back_substitute(&self.factor, &self.x, j);
         }
         for &j in &self.touched_list {
             self.touched[j] = false;
         }
         self.touched_list.clear();
     }
+}
+
+/// `x_j = z_j − Σ_i conj(L_ij) x_i`; an unconstrained variable (`d_j = 0`)
+/// stays at 0.
+fn back_substitute<T: Scalar>(factor: &DynamicLdlt<T>, x: &[T], j: usize) -> T {
+    if factor.d(j) <= 0.0 {
+        return T::default();
+    }
+    factor.augmented_row()[j] - gather_dot(x, factor.column_runs(j))
 }

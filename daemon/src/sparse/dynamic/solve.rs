@@ -155,43 +155,19 @@ impl<M: Scalar, V: Scalar + Mul<M, Output = V>> IncrementalCholesky<M, V> {
             self.y[i] = yi;
             scatter_add(&mut self.c, self.factor.column_runs(i), yi);
         }
-        let mut heap: BinaryHeap<usize> = self.dirty_list.iter().copied().collect();
         for &i in &self.dirty_list {
-            self.queued[i] = true;
             self.dirty[i] = false;
         }
+        let (factor, y) = (&self.factor, &self.y);
+        wildfire(
+            factor,
+            &self.dirty_list,
+            threshold,
+            (&mut self.x, &mut self.queued, &mut self.changed),
+            |j, x| back_substitute(factor, y, x, j),
+        );
         self.dirty_list.clear();
-        self.changed.clear();
-        let tau2 = threshold * threshold;
-        while let Some(j) = heap.pop() {
-            self.queued[j] = false;
-            let new = self.back_substitute(j);
-            let delta = (new - self.x[j]).abs2();
-            if delta > 0.0 {
-                self.changed.push(j);
-            }
-            self.x[j] = new;
-            if delta > tau2 || threshold == 0.0 {
-                for &ch in self.factor.children(j) {
-                    let ch = ch as usize;
-                    if !self.queued[ch] {
-                        self.queued[ch] = true;
-                        heap.push(ch);
-                    }
-                }
-            }
-        }
         &self.changed
-    }
-
-    /// `x_j = y_j / d_j − Σ_i conj(L_ij) x_i`; an unconstrained variable
-    /// (`d_j = 0`) stays at 0.
-    fn back_substitute(&self, j: usize) -> V {
-        let d = self.factor.d(j);
-        if d <= 0.0 {
-            return V::default();
-        }
-        self.y[j].scale(1.0 / d) - gather_dot(&self.x, self.factor.column_runs(j))
     }
 
     /// Recomputes `y`, `c` and `x` from scratch.
@@ -207,7 +183,7 @@ impl<M: Scalar, V: Scalar + Mul<M, Output = V>> IncrementalCholesky<M, V> {
             }
         }
         for j in (0..n).rev() {
-            self.x[j] = self.back_substitute(j);
+            self.x[j] = back_substitute(&self.factor, &self.y, &self.x, j);
         }
         for &i in &self.dirty_list {
             self.dirty[i] = false;
@@ -219,4 +195,58 @@ impl<M: Scalar, V: Scalar + Mul<M, Output = V>> IncrementalCholesky<M, V> {
 /// Removes column `j`'s part `L_rj y_j` from the `c` of its rows.
 fn retire<M: Scalar, V: Scalar + Mul<M, Output = V>>(f: &DynamicLdlt<M>, j: usize, y: &[V], c: &mut [V]) {
     scatter_add(c, f.column_runs(j), -y[j]);
+}
+
+/// `x_j = y_j / d_j − Σ_i conj(L_ij) x_i`; an unconstrained variable (`d_j =
+/// 0`) stays at 0.
+fn back_substitute<M: Scalar, V: Scalar + Mul<M, Output = V>>(
+    factor: &DynamicLdlt<M>,
+    y: &[V],
+    x: &[V],
+    j: usize,
+) -> V {
+    let d = factor.d(j);
+    if d <= 0.0 {
+        return V::default();
+    }
+    y[j].scale(1.0 / d) - gather_dot(x, factor.column_runs(j))
+}
+
+/// iSAM2's wildfire: recomputes `x_j = back_substitute(j, x)` from the
+/// roots down, starting at the columns `from` (closed under ancestors), and
+/// visits a column's children only when its `x` moved by more than
+/// `threshold` (with 0, every subtree under `from`: exact). `queued` is
+/// all false on entry and on return; `changed` gets the columns whose `x`
+/// changed.
+pub(super) fn wildfire<M: Scalar, V: Scalar>(
+    factor: &DynamicLdlt<M>,
+    from: &[usize],
+    threshold: f64,
+    (x, queued, changed): (&mut [V], &mut [bool], &mut Vec<usize>),
+    mut back_substitute: impl FnMut(usize, &[V]) -> V,
+) {
+    let mut heap: BinaryHeap<usize> = from.iter().copied().collect();
+    for &j in from {
+        queued[j] = true;
+    }
+    changed.clear();
+    let tau2 = threshold * threshold;
+    while let Some(j) = heap.pop() {
+        queued[j] = false;
+        let new = back_substitute(j, x);
+        let delta = (new - x[j]).abs2();
+        if delta > 0.0 {
+            changed.push(j);
+        }
+        x[j] = new;
+        if delta > tau2 || threshold == 0.0 {
+            for &ch in factor.children(j) {
+                let ch = ch as usize;
+                if !queued[ch] {
+                    queued[ch] = true;
+                    heap.push(ch);
+                }
+            }
+        }
+    }
 }
