@@ -65,6 +65,7 @@ use faer::c64;
 use resolve::Job;
 use state::{Polish, State};
 use std::fmt;
+use std::time::Instant;
 
 /// An edge as a frontend gives it: keyframe ids, `T_ij`, Ω and its kind.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -588,8 +589,10 @@ impl Engine {
         };
         // the ops it missed join where this state's solves put them
         state.set_hints(self.state.estimate(), &self.state.model.joined);
+        let (caught_up, mut replayed) = (Instant::now(), 0);
         for (seq, op) in log {
             if outcome.last_seq.is_none_or(|last| seq > last) {
+                replayed += 1;
                 if let Err(e) = state.replay(&op, self.config.wildfire_threshold) {
                     tracing::warn!(error = %e, seq, ?op, "Re-solve cannot replay an op; discarded.");
                     return false;
@@ -600,6 +603,7 @@ impl Engine {
             tracing::warn!(error = %e, "Re-solve cannot connect the replayed edges; discarded.");
             return false;
         }
+        let catch_up_seconds = caught_up.elapsed().as_secs_f64();
         state.clear_hints();
         retire(std::mem::replace(&mut self.state, state));
         self.after_resolve();
@@ -611,6 +615,8 @@ impl Engine {
         }
         tracing::debug!(
             seconds = outcome.seconds,
+            replayed,
+            catch_up_seconds,
             chi2 = self.state.chi2(),
             "Re-solve swapped in."
         );
