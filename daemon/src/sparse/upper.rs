@@ -61,6 +61,25 @@ impl<T: Scalar> UpperCsc<T> {
         }
     }
 
+    /// A pattern with zero values from its compressed columns: `col_ptr`
+    /// has `n + 1` offsets into `row_idx`, whose rows are sorted within
+    /// each column and `≤` its index.
+    pub fn from_parts(n: usize, col_ptr: Vec<usize>, row_idx: Vec<usize>) -> Self {
+        assert_eq!(col_ptr.len(), n + 1);
+        assert_eq!(col_ptr[n], row_idx.len());
+        debug_assert!((0..n).all(|c| {
+            let rows = &row_idx[col_ptr[c]..col_ptr[c + 1]];
+            rows.windows(2).all(|w| w[0] < w[1]) && rows.last().is_none_or(|&r| r <= c)
+        }));
+        let values = vec![T::default(); row_idx.len()];
+        Self {
+            n,
+            col_ptr,
+            row_idx,
+            values,
+        }
+    }
+
     /// The same pattern with other values; `values` must match [`Self::nnz`].
     pub fn with_values<U: Scalar>(&self, values: Vec<U>) -> UpperCsc<U> {
         assert_eq!(values.len(), self.values.len());
