@@ -5,17 +5,16 @@
 //! with its edges and one solve. Deterministic work, one thread; prints
 //! a table (min of `--runs` runs).
 //!
-//! `cargo bench -p slamd-benches --bench incremental_path -- [DATASET] [--runs R] [--append K]`
+//! `cargo bench -p slamd-benches --bench incremental_path -- [DATASET] [--runs R] [--append K] [--recent-last L]`
 
 use slamd::engine::gauss_newton::GaussNewton;
+use slamd::engine::EngineConfig;
 use slamd::geometry::Pose2;
 use slamd::graph::{EdgeKind, PoseGraph};
 use slamd::solver::{solve_batch, BatchOptions};
 use slamd::sparse::ordering::amd_newest_last;
 use std::time::Instant;
 
-/// Keyframes kept last in the fresh ordering (the engine's default).
-const RECENT_LAST: usize = 32;
 /// The engine's wildfire threshold.
 const THRESHOLD: f64 = 1e-4;
 
@@ -45,6 +44,8 @@ fn main() {
         .find(|a| a.ends_with(".g2o") || a.ends_with(".graph"))
         .map_or("city10000.g2o", String::as_str);
     let (runs, append) = (value("--runs", 3), value("--append", 300));
+    // keyframes kept last in the fresh ordering
+    let recent = value("--recent-last", EngineConfig::default().recent_last);
     let graph = slamd_tests::read(name);
     let groups = graph.by_newer();
     println!("{name}: fresh factor at n0 keyframes, then {append} keyframes streamed (min of {runs} runs)\n");
@@ -60,7 +61,7 @@ fn main() {
         };
         let lin = solve_batch(&prefix, &opts).expect("prefix solves").poses;
         let best = (0..runs)
-            .map(|_| stream(&graph, &groups, &lin, n0, n1))
+            .map(|_| stream(&graph, &groups, &lin, (n0, n1), recent))
             .min_by(|a, b| (a.update_s + a.solve_s).total_cmp(&(b.update_s + b.solve_s)))
             .expect("one run");
         println!(
@@ -83,7 +84,13 @@ fn main() {
 /// Builds the factor of keyframes `0..n0` at `lin` and streams `n0..n1`
 /// as the engine does: a keyframe joins through its odometry, then its
 /// loop closures enter, then one solve.
-fn stream(graph: &PoseGraph, groups: &[Vec<usize>], lin: &[Pose2], n0: usize, n1: usize) -> Run {
+fn stream(
+    graph: &PoseGraph,
+    groups: &[Vec<usize>],
+    lin: &[Pose2],
+    (n0, n1): (usize, usize),
+    recent: usize,
+) -> Run {
     let prefix = graph.prefix(n0);
     let edges: Vec<(usize, f64)> = (0..prefix.edges().len()).map(|e| (e, 1.0)).collect();
     let pairs = prefix
@@ -91,7 +98,7 @@ fn stream(graph: &PoseGraph, groups: &[Vec<usize>], lin: &[Pose2], n0: usize, n1
         .iter()
         .filter(|edge| edge.from > 0 && edge.to > 0)
         .map(|edge| (edge.from - 1, edge.to - 1));
-    let order: Vec<usize> = amd_newest_last(n0 - 1, pairs, RECENT_LAST)
+    let order: Vec<usize> = amd_newest_last(n0 - 1, pairs, recent)
         .into_iter()
         .map(|c| c + 1)
         .collect();
