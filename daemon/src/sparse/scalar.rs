@@ -36,12 +36,12 @@ pub trait Scalar:
     fn to_c64(self) -> c64;
     /// Multiplies by a real number.
     fn scale(self, r: f64) -> Self;
-    /// One column step of a multiple-rank update over a run of rows
-    /// starting at `first` (see `sparse::dynamic::runs`); reals take a
-    /// vectorised path when the CPU has one and the run is 8 rows or longer.
+    /// One column step of a multiple-rank update over every run of a
+    /// column, `runs` = (rows, run starts) (see `sparse::dynamic::runs`);
+    /// reals take a vectorised path when the CPU has one.
     #[inline]
-    fn rank_run(w: &mut [&mut [Self]], first: usize, l: &mut [Self], p: &[Self], g: &[Self]) {
-        crate::sparse::dynamic::runs::rank_run_generic(w, first, l, p, g)
+    fn rank_runs(w: &mut [&mut [Self]], runs: (&[u32], &[u32]), l: &mut [Self], p: &[Self], g: &[Self]) {
+        crate::sparse::dynamic::runs::rank_runs_generic(w, runs, l, p, g)
     }
     /// The same step over a column whose runs are short, row by row at
     /// `rows`; reals take a path with fused multiply-adds when the CPU has
@@ -78,16 +78,13 @@ impl Scalar for f64 {
         self * r
     }
     #[inline]
-    fn rank_run(w: &mut [&mut [Self]], first: usize, l: &mut [Self], p: &[Self], g: &[Self]) {
+    fn rank_runs(w: &mut [&mut [Self]], runs: (&[u32], &[u32]), l: &mut [Self], p: &[Self], g: &[Self]) {
         #[cfg(target_arch = "x86_64")]
-        if l.len() >= 8
-            && std::arch::is_x86_feature_detected!("avx2")
-            && std::arch::is_x86_feature_detected!("fma")
-        {
+        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
             // SAFETY: the CPU has AVX2 and FMA
-            return unsafe { crate::sparse::dynamic::runs::rank_run_fma(w, first, l, p, g) };
+            return unsafe { crate::sparse::dynamic::runs::rank_runs_fma(w, runs, l, p, g) };
         }
-        crate::sparse::dynamic::runs::rank_run_generic(w, first, l, p, g)
+        crate::sparse::dynamic::runs::rank_runs_generic(w, runs, l, p, g)
     }
     #[inline]
     fn rank_rows(w: &mut [&mut [Self]], rows: &[u32], l: &mut [Self], p: &[Self], g: &[Self]) {

@@ -68,65 +68,86 @@ pub(crate) fn for_each_run(rows: &[u32], starts: &[u32], mut f: impl FnMut(usize
     }
 }
 
-/// One column step of a multiple-rank update over a run of rows starting
-/// at `first`: for every element and each vector `t` in turn,
-/// `w_t ← w_t − p_t l`, then `l ← l + g_t w_t`. All vectors go in one pass,
-/// so that `l` is loaded and stored once however many there are.
+/// One column step of a multiple-rank update over every run of a column
+/// (its `rows`, their [`run_starts`] and values `l`): for every element and
+/// each vector `t` in turn, `w_t ← w_t − p_t l`, then `l ← l + g_t w_t`. All
+/// vectors go in one pass, so that `l` is loaded and stored once however
+/// many there are.
 #[inline]
-pub(crate) fn rank_step<T: Scalar>(w: &mut [&mut [T]], first: usize, l: &mut [T], p: &[T], g: &[T]) {
-    T::rank_run(w, first, l, p, g)
-}
-
-/// [`rank_step`] one row at a time.
-#[inline]
-pub(crate) fn rank_run_generic<T: Scalar>(w: &mut [&mut [T]], first: usize, l: &mut [T], p: &[T], g: &[T]) {
-    for (e, lv) in l.iter_mut().enumerate() {
-        let r = first + e;
-        let mut x = *lv;
-        for (t, w) in w.iter_mut().enumerate() {
-            let a = w[r] - p[t] * x;
-            x += g[t] * a;
-            w[r] = a;
+pub(crate) fn rank_runs_generic<T: Scalar>(
+    w: &mut [&mut [T]],
+    (rows, starts): (&[u32], &[u32]),
+    l: &mut [T],
+    p: &[T],
+    g: &[T],
+) {
+    for_each_run(rows, starts, |first, at| {
+        for (e, lv) in l[at].iter_mut().enumerate() {
+            let r = first + e;
+            let mut x = *lv;
+            for (t, w) in w.iter_mut().enumerate() {
+                let a = w[r] - p[t] * x;
+                x += g[t] * a;
+                w[r] = a;
+            }
+            *lv = x;
         }
-        *lv = x;
-    }
+    });
 }
 
-/// [`rank_step`] for exactly `K` vectors, with fused multiply-adds: the
-/// vectors unroll, and the loop over the rows vectorises.
+/// [`rank_runs_generic`] for exactly `K` vectors, with fused multiply-adds:
+/// the vectors unroll, and the loop over a run's rows vectorises. The
+/// number of vectors is dispatched once per column, not per run: a short
+/// run (a keyframe's three rows) costs its arithmetic, not a call.
 #[inline(always)]
-fn rank_run_fixed<const K: usize>(w: &mut [&mut [f64]], first: usize, l: &mut [f64], p: &[f64], g: &[f64]) {
-    let n = l.len();
+fn rank_runs_fixed<const K: usize>(
+    w: &mut [&mut [f64]],
+    (rows, starts): (&[u32], &[u32]),
+    l: &mut [f64],
+    p: &[f64],
+    g: &[f64],
+) {
     let Some((ws, _)) = w.split_first_chunk_mut::<K>() else {
         unreachable!("K = w.len() vectors");
     };
-    let ws: [&mut [f64]; K] = ws.each_mut().map(|s| &mut s[first..first + n]);
     let np: [f64; K] = std::array::from_fn(|t| -p[t]);
     let g: [f64; K] = std::array::from_fn(|t| g[t]);
-    for e in 0..n {
-        let mut x = l[e];
-        for t in 0..K {
-            let a = np[t].mul_add(x, ws[t][e]);
-            x = g[t].mul_add(a, x);
-            ws[t][e] = a;
+    for_each_run(rows, starts, |first, at| {
+        let l = &mut l[at];
+        let n = l.len();
+        let ws: [&mut [f64]; K] = ws.each_mut().map(|s| &mut s[first..first + n]);
+        for e in 0..n {
+            let mut x = l[e];
+            for t in 0..K {
+                let a = np[t].mul_add(x, ws[t][e]);
+                x = g[t].mul_add(a, x);
+                ws[t][e] = a;
+            }
+            l[e] = x;
         }
-        l[e] = x;
-    }
+    });
 }
 
-/// [`rank_step`] compiled for AVX2 with fused multiply-adds (four lanes;
-/// each step rounds once instead of twice), for up to `MAX_RANK` vectors.
+/// [`rank_runs_generic`] compiled for AVX2 with fused multiply-adds (four
+/// lanes; each step rounds once instead of twice), for up to `MAX_RANK`
+/// vectors.
 ///
 /// # Safety
 /// The CPU must have AVX2 and FMA.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
-pub(crate) unsafe fn rank_run_fma(w: &mut [&mut [f64]], first: usize, l: &mut [f64], p: &[f64], g: &[f64]) {
-    by_rank!(rank_run_fixed, rank_run_generic, w, first, l, p, g)
+pub(crate) unsafe fn rank_runs_fma(
+    w: &mut [&mut [f64]],
+    runs: (&[u32], &[u32]),
+    l: &mut [f64],
+    p: &[f64],
+    g: &[f64],
+) {
+    by_rank!(rank_runs_fixed, rank_runs_generic, w, runs, l, p, g)
 }
 
 /// One column step of a multiple-rank update over a column whose runs are
-/// short: [`rank_step`]'s arithmetic, row by row at the given `rows`.
+/// short: [`rank_runs_generic`]'s arithmetic, row by row at the given `rows`.
 #[inline]
 pub(crate) fn rank_rows_generic<T: Scalar>(w: &mut [&mut [T]], rows: &[u32], l: &mut [T], p: &[T], g: &[T]) {
     for (&r, lv) in rows.iter().zip(l.iter_mut()) {

@@ -33,7 +33,7 @@
 //! changes, at the cost of one row per column.
 
 use super::factor::DynamicLdlt;
-use super::runs::{dense_enough, extend_run_starts, for_each_run, rank_step, run_starts};
+use super::runs::{dense_enough, extend_run_starts, run_starts};
 use crate::sparse::Scalar;
 use std::fmt;
 
@@ -233,9 +233,8 @@ impl<T: Scalar> DynamicLdlt<T> {
         }
         let w = &mut w[..live];
         if dense_enough(&col.rows, &col.starts) {
-            for_each_run(&col.rows, &col.starts, |first, at| {
-                rank_step(w, first, &mut col.vals[at], &ps[..live], &gammas[..live]);
-            });
+            let runs = (&col.rows[..], &col.starts[..]);
+            T::rank_runs(w, runs, &mut col.vals, &ps[..live], &gammas[..live]);
             return Ok(());
         }
         // short runs: one pass over the rows, every vector per row
