@@ -31,7 +31,7 @@
 //! # origin = "45.5138,9.2110"  # ENU origin LAT,LON[,HEIGHT]; default: the first fix
 //!
 //! [engine]                     # see slamd::engine::EngineConfig
-//! resolve_every_edges = 3000
+//! resolve_every_edges = 10000
 //! refresh_every_edges = 50     # relinearise between re-solves when the worker is free
 //! relinearise_ratio = 1.2      # χ² past this × its linear model's (+1): relinearise inline
 //! defer_budget = 0.0           # > 0: agreeing loop closures wait while their χ² ≤ this × the estimate's

@@ -11,13 +11,16 @@ use crate::outliers::OutlierConfig;
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(default)]
 pub struct EngineConfig {
-    /// Re-solve after this many new edges (0: never on count). A
-    /// re-solve's polish holds the only background thread, so no refresh
-    /// lands while it runs (0.4-1.1 s late in City10000, hundreds of
-    /// keyframes): every 1000 edges, City10000 replayed in 9.7-11.7 s,
-    /// every 3000 in 8.2-9.0 s, with the same worst sampled snapshots
-    /// (City10000 unfiltered 1.16-1.30 against 1.21-1.33, Manhattan 1.26
-    /// against 1.27-1.35) and the same outlier precision and recall.
+    /// Re-solve after this many new edges (0: never on count; fill, GPS,
+    /// the drift and nonlinearity checks, idle time and the end of a
+    /// stream still start re-solves). A re-solve's polish holds the only
+    /// background thread, so no refresh lands while it runs (0.25-0.65 s
+    /// late in City10000, hundreds of keyframes appended meanwhile). Every
+    /// 3000 edges against every 10000, replays alternated (README, "Re-solve
+    /// cadence"): W10000 23.9-44.3 s against 16.8-20.2 s, City10000
+    /// 4.21-4.61 against 4.40-4.43 s, the same final χ², worst sampled
+    /// snapshots and outlier precision and recall within their run-to-run
+    /// spread.
     pub resolve_every_edges: usize,
     /// Between re-solves, refresh after this many new edges when the
     /// background thread is free: relinearise every edge at the estimate
@@ -85,7 +88,7 @@ pub struct EngineConfig {
 impl Default for EngineConfig {
     fn default() -> Self {
         Self {
-            resolve_every_edges: 3000,
+            resolve_every_edges: 10000,
             refresh_every_edges: 50,
             resolve_fill_ratio: 2.0,
             background: true,
