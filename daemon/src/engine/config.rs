@@ -12,15 +12,15 @@ use crate::outliers::OutlierConfig;
 #[serde(default)]
 pub struct EngineConfig {
     /// Re-solve after this many new edges (0: never on count; fill, GPS,
-    /// the drift and nonlinearity checks, idle time and the end of a
-    /// stream still start re-solves). A re-solve's polish holds the only
-    /// background thread, so no refresh lands while it runs (0.25-0.65 s
-    /// late in City10000, hundreds of keyframes appended meanwhile). Every
-    /// 3000 edges against every 10000, replays alternated (README, "Re-solve
-    /// cadence"): W10000 23.9-44.3 s against 16.8-20.2 s, City10000
-    /// 4.21-4.61 against 4.40-4.43 s, the same final χ², worst sampled
-    /// snapshots and outlier precision and recall within their run-to-run
-    /// spread.
+    /// the drift and nonlinearity checks, idle time (the daemon calls
+    /// `Engine::idle`) and the end of a stream still start re-solves). A
+    /// re-solve's polish holds the only background thread, so no refresh
+    /// lands while it runs (0.25-0.65 s late in City10000, hundreds of
+    /// keyframes appended meanwhile). Every 3000 edges against every
+    /// 10000, replays alternated (README, "Re-solve cadence"): W10000
+    /// 23.9-44.3 s against 16.8-20.2 s, City10000 4.21-4.61 against
+    /// 4.40-4.43 s, the same final χ², worst sampled snapshots and outlier
+    /// precision and recall within their run-to-run spread.
     pub resolve_every_edges: usize,
     /// Between re-solves, refresh after this many new edges when the
     /// background thread is free: relinearise every edge at the estimate
