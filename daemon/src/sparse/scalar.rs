@@ -80,7 +80,7 @@ impl Scalar for f64 {
     #[inline]
     fn rank_runs(w: &mut [&mut [Self]], runs: (&[u32], &[u32]), l: &mut [Self], p: &[Self], g: &[Self]) {
         #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
+        if avx2_fma() {
             // SAFETY: the CPU has AVX2 and FMA
             return unsafe { crate::sparse::dynamic::runs::rank_runs_fma(w, runs, l, p, g) };
         }
@@ -89,7 +89,7 @@ impl Scalar for f64 {
     #[inline]
     fn rank_rows(w: &mut [&mut [Self]], rows: &[u32], l: &mut [Self], p: &[Self], g: &[Self]) {
         #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
+        if avx2_fma() {
             // SAFETY: the CPU has AVX2 and FMA
             return unsafe { crate::sparse::dynamic::runs::rank_rows_fma(w, rows, l, p, g) };
         }
@@ -122,4 +122,12 @@ impl Scalar for c64 {
     fn scale(self, r: f64) -> Self {
         self * r
     }
+}
+
+/// Whether this CPU has AVX2 and FMA, the update kernels' fast path
+/// (`std` caches the answer).
+#[cfg(target_arch = "x86_64")]
+#[inline]
+fn avx2_fma() -> bool {
+    std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
 }

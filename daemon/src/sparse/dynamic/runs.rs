@@ -83,16 +83,22 @@ pub(crate) fn rank_runs_generic<T: Scalar>(
 ) {
     for_each_run(rows, starts, |first, at| {
         for (e, lv) in l[at].iter_mut().enumerate() {
-            let r = first + e;
-            let mut x = *lv;
-            for (t, w) in w.iter_mut().enumerate() {
-                let a = w[r] - p[t] * x;
-                x += g[t] * a;
-                w[r] = a;
-            }
-            *lv = x;
+            row_step(w, first + e, lv, p, g);
         }
     });
+}
+
+/// The step of every vector at row `r` of a column whose value there is
+/// `l`: for each `t` in turn, `w_t ← w_t − p_t l`, then `l ← l + g_t w_t`.
+#[inline(always)]
+fn row_step<T: Scalar>(w: &mut [&mut [T]], r: usize, l: &mut T, p: &[T], g: &[T]) {
+    let mut x = *l;
+    for (t, w) in w.iter_mut().enumerate() {
+        let a = w[r] - p[t] * x;
+        w[r] = a;
+        x += g[t] * a;
+    }
+    *l = x;
 }
 
 /// [`rank_runs_generic`] for exactly `K` vectors, with fused multiply-adds:
@@ -151,14 +157,7 @@ pub(crate) unsafe fn rank_runs_fma(
 #[inline]
 pub(crate) fn rank_rows_generic<T: Scalar>(w: &mut [&mut [T]], rows: &[u32], l: &mut [T], p: &[T], g: &[T]) {
     for (&r, lv) in rows.iter().zip(l.iter_mut()) {
-        let r = r as usize;
-        let mut x = *lv;
-        for (t, w) in w.iter_mut().enumerate() {
-            let a = w[r] - p[t] * x;
-            w[r] = a;
-            x += g[t] * a;
-        }
-        *lv = x;
+        row_step(w, r as usize, lv, p, g);
     }
 }
 
