@@ -20,14 +20,6 @@ pub(crate) struct Column<T> {
     pub(crate) starts: Vec<u32>,
 }
 
-impl<T> Column<T> {
-    fn new(rows: Vec<u32>, vals: Vec<T>) -> Self {
-        let mut starts = Vec::new();
-        super::runs::run_starts(&rows, &mut starts);
-        Self { rows, vals, starts }
-    }
-}
-
 /// A sparse `L D Lᴴ` factor in the elimination order (column `k` is the
 /// `k`-th variable eliminated).
 #[derive(Clone, Debug, Default)]
@@ -121,7 +113,13 @@ impl<T: Scalar> DynamicLdlt<T> {
             supernodal_params: SymbolicSupernodalParams { relax: None },
             ..Default::default()
         };
-        let order = SymmetricOrdering::Custom(faer::perm::PermRef::new_checked(perm, &inv, n));
+        // the engine assembles its systems already in elimination order;
+        // faer then skips permuting a copy of `a` in both analyses
+        let order = if perm.iter().enumerate().all(|(k, &i)| k == i) {
+            SymmetricOrdering::Identity
+        } else {
+            SymmetricOrdering::Custom(faer::perm::PermRef::new_checked(perm, &inv, n))
+        };
         let symbolic = factorize_symbolic_cholesky(a.symbolic(), Side::Upper, order, params)
             .map_err(|_| FactorError::Symbolic)?;
         let mut values = vec![T::default(); symbolic.len_val()];
@@ -159,20 +157,46 @@ impl<T: Scalar> DynamicLdlt<T> {
                 // supernode `s`: columns `begin..end`, a dense column-major
                 // block whose rows are its own columns (D on the diagonal, L
                 // below), then its pattern
+                // below the diagonal, column `c` holds the rows `begin + c +
+                // 1..end` (one run) and then the supernode's pattern, whose
+                // run starts are found once per supernode
                 let (rows_at, vals_at, row_idx) = (s.col_ptr_for_row_idx(), s.col_ptr_for_val(), s.row_idx());
+                let (mut pattern, mut pattern_starts) = (Vec::new(), Vec::new());
+                f.cols.reserve(n);
+                f.d.reserve(n);
                 for (sn, (&begin, &end)) in s.supernode_begin().iter().zip(s.supernode_end()).enumerate() {
-                    let pattern = &row_idx[rows_at[sn]..rows_at[sn + 1]];
+                    pattern.clear();
+                    pattern.extend(row_idx[rows_at[sn]..rows_at[sn + 1]].iter().map(|&r| r as u32));
+                    super::runs::run_starts(&pattern, &mut pattern_starts);
                     let width = end - begin;
                     let height = width + pattern.len();
                     let block = &values[vals_at[sn]..vals_at[sn + 1]];
                     for c in 0..width {
                         let col = &block[c * height..(c + 1) * height];
-                        let rows = (begin + c + 1..end).map(|r| r as u32);
-                        f.push_column(
+                        let inner = width - c - 1;
+                        let mut rows = Vec::with_capacity(inner + pattern.len());
+                        rows.extend((begin + c + 1..end).map(|r| r as u32));
+                        rows.extend_from_slice(&pattern);
+                        // the pattern's first run continues the inner one
+                        // when it starts at row `end`
+                        let joined = inner > 0 && pattern.first() == Some(&(end as u32));
+                        let mut starts = Vec::with_capacity(pattern_starts.len() + 1);
+                        if inner > 0 {
+                            starts.push(0);
+                        }
+                        let skip = usize::from(joined);
+                        starts.extend(pattern_starts[skip..].iter().map(|&p| p + inner as u32));
+                        debug_assert_eq!(starts, {
+                            let mut check = Vec::new();
+                            super::runs::run_starts(&rows, &mut check);
+                            check
+                        });
+                        f.push_column_with_starts(
                             begin + c,
                             col[c].real(),
-                            rows.chain(pattern.iter().map(|&r| r as u32)).collect(),
+                            rows,
                             col[c + 1..].to_vec(),
+                            starts,
                         )?;
                     }
                 }
@@ -186,11 +210,25 @@ impl<T: Scalar> DynamicLdlt<T> {
     /// Appends column `k` of a fresh factor, refusing a pivot that is not
     /// positive.
     fn push_column(&mut self, k: usize, d: f64, rows: Vec<u32>, vals: Vec<T>) -> Result<(), FactorError> {
+        let mut starts = Vec::new();
+        super::runs::run_starts(&rows, &mut starts);
+        self.push_column_with_starts(k, d, rows, vals, starts)
+    }
+
+    /// [`Self::push_column`] with the run starts of `rows` known.
+    fn push_column_with_starts(
+        &mut self,
+        k: usize,
+        d: f64,
+        rows: Vec<u32>,
+        vals: Vec<T>,
+        starts: Vec<u32>,
+    ) -> Result<(), FactorError> {
         if d.is_nan() || d <= 0.0 {
             return Err(FactorError::NotPositiveDefinite { step: k });
         }
         self.d.push(d);
-        self.cols.push(Column::new(rows, vals));
+        self.cols.push(Column { rows, vals, starts });
         Ok(())
     }
 
@@ -311,7 +349,14 @@ impl<T: Scalar> DynamicLdlt<T> {
     }
 
     pub(crate) fn rebuild_children(&mut self) {
-        self.children = vec![Vec::new(); self.cols.len()];
+        // sized first: one allocation per column with children
+        let mut count = vec![0u32; self.cols.len()];
+        for k in 0..self.cols.len() {
+            if let Some(p) = self.parent(k) {
+                count[p] += 1;
+            }
+        }
+        self.children = count.iter().map(|&c| Vec::with_capacity(c as usize)).collect();
         for k in 0..self.cols.len() {
             if let Some(p) = self.parent(k) {
                 self.children[p].push(k as u32);
