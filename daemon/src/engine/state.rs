@@ -10,9 +10,9 @@ use super::linear_stages::LinearStages;
 pub use super::model::Model;
 pub use super::op::{Op, Polish, SnapshotSource};
 use super::{EngineConfig, EngineError};
-use crate::geometry::Pose2;
+use crate::geometry::{Pose2, Turns};
 use crate::gps::Georef;
-use crate::graph::{edge_chi2, edge_error, Edge, EdgeKind, KeyframeId};
+use crate::graph::{edge_chi2, edge_error, edge_error_turned, Edge, EdgeKind, KeyframeId};
 use crate::outliers::{DriftRun, OutlierConfig, OFF_BELOW};
 use crate::sparse::ordering::amd_newest_last;
 use crate::sparse::FactorError;
@@ -31,6 +31,11 @@ pub struct State {
     offset: Vec<Pose2>,
     estimate: Vec<Pose2>,
     edge_chi2: Vec<f64>,
+    /// Rotations of the estimate's keyframes and of the edges'
+    /// measurements, for the χ² bookkeeping (a moved keyframe meets
+    /// several edges; a measurement never changes).
+    turns: Turns,
+    measured_turns: Turns,
     chi2: f64,
     stamp: Vec<u32>,
     epoch: u32,
@@ -83,6 +88,8 @@ impl State {
             offset,
             estimate,
             edge_chi2: vec![0.0; edges],
+            turns: Turns::default(),
+            measured_turns: Turns::default(),
             chi2: 0.0,
             epoch: 0,
             outliers: config.outliers,
@@ -509,7 +516,8 @@ impl State {
     /// Recomputes one edge's cached χ² at the current estimate.
     fn refresh_edge(&mut self, e: usize) {
         let edge = &self.model.graph.edges()[e];
-        let v = self.model.weight(e) * edge_chi2(edge, &self.estimate);
+        let v = self.model.weight(e)
+            * turned_chi2(&mut self.turns, &mut self.measured_turns, e, edge, &self.estimate);
         self.chi2 += v - self.edge_chi2[e];
         self.deferred.refresh(e, self.edge_chi2[e], v);
         self.edge_chi2[e] = v;
@@ -588,7 +596,7 @@ impl State {
         let est = &self.estimate;
         for (e, edge) in self.model.graph.edges().iter().enumerate() {
             self.edge_chi2[e] = if self.model.applied[e] {
-                self.model.weight(e) * edge_chi2(edge, est)
+                self.model.weight(e) * turned_chi2(&mut self.turns, &mut self.measured_turns, e, edge, est)
             } else {
                 0.0
             };
@@ -749,6 +757,17 @@ impl State {
     pub fn model(&self) -> &Model {
         &self.model
     }
+}
+
+/// `eᵀ Ω e` of edge `e` at `estimate`, the rotations from the caches (the
+/// χ² bookkeeping evaluates every edge of each keyframe that moved; the
+/// sines and cosines were 70% of it).
+fn turned_chi2(turns: &mut Turns, measured: &mut Turns, e: usize, edge: &Edge, estimate: &[Pose2]) -> f64 {
+    let (xi, xj) = (&estimate[edge.from], &estimate[edge.to]);
+    let turn_i = turns.get(edge.from, xi.theta);
+    let turn_m = measured.get(e, edge.measurement.theta);
+    edge.information
+        .mahalanobis(&edge_error_turned(edge, xi, turn_i, xj, turn_m))
 }
 
 #[cfg(test)]

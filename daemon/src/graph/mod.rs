@@ -8,7 +8,7 @@ mod cost;
 mod edge;
 mod information;
 
-pub use cost::{chi2, chi2_of_edges, edge_chi2, edge_error};
+pub use cost::{chi2, chi2_of_edges, edge_chi2, edge_error, edge_error_turned};
 pub use edge::{Edge, EdgeKind};
 pub use information::{Information, InformationError};
 
