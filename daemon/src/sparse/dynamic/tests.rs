@@ -562,6 +562,45 @@ fn augmented_zero_pivots_absorb_whole_vectors() {
 }
 
 #[test]
+fn the_wildfire_recomputes_every_touched_column_however_little_its_parent_moved() {
+    // A chain 0 → 1 → … → 5; an update at column 0 with a tail touches
+    // the whole path. With a threshold no change reaches, nothing spreads
+    // on its own account, yet every touched column must be recomputed:
+    // the root barely moves while column 0 moves most.
+    let n = 6;
+    let mut e = vec![];
+    for i in 0..n {
+        e.push((i, i, 4.0));
+        if i + 1 < n {
+            e.push((i, i + 1, -1.0));
+        }
+    }
+    let a = UpperCsc::<f64>::from_triplets(n, &e);
+    let b = vec![1.0; n];
+    let identity: Vec<usize> = (0..n).collect();
+    let mut chol = AugmentedCholesky::new(DynamicLdlt::from_matrix(&a, &identity).unwrap(), &b, 10.0);
+    chol.rank_k(&[&[(0, 1.0)]], &[3.0], 1.0).unwrap();
+    chol.solve(1e9);
+    let mut dense = DMatrix::<f64>::zeros(n, n);
+    for &(i, j, v) in &e {
+        dense[(i, j)] = v;
+        dense[(j, i)] = v;
+    }
+    dense[(0, 0)] += 1.0;
+    let mut rhs = nalgebra::DVector::from_vec(b);
+    rhs[0] += 3.0;
+    let want = dense.cholesky().unwrap().solve(&rhs);
+    for j in 0..n {
+        assert!(
+            (chol.x()[j] - want[j]).abs() < 1e-12,
+            "x_{j} {} vs {}",
+            chol.x()[j],
+            want[j]
+        );
+    }
+}
+
+#[test]
 fn vectors_on_separate_branches_walk_their_own_paths_and_join() {
     // Elimination tree 0 → 1 → 4 → 5 and 2 → 3 → 4: one vector starts on
     // each branch. Each climbs its own branch; they join at 4 and sweep
