@@ -50,6 +50,13 @@ pub trait Scalar:
     fn rank_rows(w: &mut [&mut [Self]], rows: &[u32], l: &mut [Self], p: &[Self], g: &[Self]) {
         crate::sparse::dynamic::runs::rank_rows_generic(w, rows, l, p, g)
     }
+    /// `Σ_r x_r conj(L_rj)` over a column, `column` = (rows, values, run
+    /// starts): the back-substitution's sum; reals take a path with fused
+    /// multiply-adds when the CPU has them.
+    #[inline]
+    fn dot_runs(x: &[Self], column: (&[u32], &[Self], &[u32])) -> Self {
+        crate::sparse::dynamic::runs::gather_dot(x, column)
+    }
 }
 
 impl Scalar for f64 {
@@ -94,6 +101,15 @@ impl Scalar for f64 {
             return unsafe { crate::sparse::dynamic::runs::rank_rows_fma(w, rows, l, p, g) };
         }
         crate::sparse::dynamic::runs::rank_rows_generic(w, rows, l, p, g)
+    }
+    #[inline]
+    fn dot_runs(x: &[Self], column: (&[u32], &[Self], &[u32])) -> Self {
+        #[cfg(target_arch = "x86_64")]
+        if avx2_fma() {
+            // SAFETY: the CPU has AVX2 and FMA
+            return unsafe { crate::sparse::dynamic::runs::gather_dot_fma(x, column) };
+        }
+        crate::sparse::dynamic::runs::gather_dot(x, column)
     }
 }
 

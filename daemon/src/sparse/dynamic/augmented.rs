@@ -15,7 +15,6 @@
 //! solution, kept by the same walks.
 
 use super::factor::DynamicLdlt;
-use super::runs::gather_dot;
 use super::solve::wildfire;
 use super::update::UpdateError;
 use crate::sparse::Scalar;
@@ -181,5 +180,5 @@ fn back_substitute<T: Scalar>(factor: &DynamicLdlt<T>, x: &[T], j: usize) -> T {
     if factor.d(j) <= 0.0 {
         return T::default();
     }
-    factor.augmented_row()[j] - gather_dot(x, factor.column_runs(j))
+    factor.augmented_row()[j] - T::dot_runs(x, factor.column_runs(j))
 }
