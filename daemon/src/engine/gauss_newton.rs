@@ -269,8 +269,7 @@ impl GaussNewton {
         self.flush()?;
         self.epoch = self.epoch.wrapping_add(1);
         self.changed.clear();
-        let changed_cols = self.chol.solve(threshold).to_vec();
-        for c in changed_cols {
+        for &c in self.chol.solve(threshold) {
             let k = self.keyframe_of[c] as usize;
             if self.stamp[k] != self.epoch {
                 self.stamp[k] = self.epoch;

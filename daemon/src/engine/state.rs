@@ -36,6 +36,8 @@ pub struct State {
     /// several edges; a measurement never changes).
     turns: Turns,
     measured_turns: Turns,
+    /// The keyframes the last solve moved (a buffer kept between solves).
+    moved: Vec<usize>,
     chi2: f64,
     stamp: Vec<u32>,
     epoch: u32,
@@ -90,6 +92,7 @@ impl State {
             edge_chi2: vec![0.0; edges],
             turns: Turns::default(),
             measured_turns: Turns::default(),
+            moved: Vec::new(),
             chi2: 0.0,
             epoch: 0,
             outliers: config.outliers,
@@ -548,24 +551,26 @@ impl State {
     /// Solves the source's factor and refreshes the estimate and its χ².
     /// Returns the number of keyframes that moved.
     fn solve_factor(&mut self, threshold: f64) -> Result<usize, EngineError> {
-        let changed = match self.source {
+        // the buffer is reused: a fresh one per solve made glibc
+        // consolidate its free lists every keyframe
+        let mut changed = std::mem::take(&mut self.moved);
+        changed.clear();
+        match self.source {
             SnapshotSource::GaussNewton => {
                 let gn = self.gn.as_mut().expect("Gauss–Newton source");
-                let changed = gn.solve(threshold).map_err(EngineError::Numeric)?.to_vec();
+                changed.extend_from_slice(gn.solve(threshold).map_err(EngineError::Numeric)?);
                 for &k in &changed {
                     self.estimate[k] = gn.estimate()[k];
                 }
-                changed
             }
             SnapshotSource::Linear => {
                 let l = self.linear.as_mut().expect("linear source");
-                let changed = l.solve(&self.model.graph, threshold).to_vec();
+                changed.extend_from_slice(l.solve(&self.model.graph, threshold));
                 for &k in &changed {
                     self.estimate[k] = self.offset[k].compose(&l.pose(k));
                 }
-                changed
             }
-        };
+        }
         if changed.len() * 4 > self.model.graph.len() {
             self.recompute_chi2();
         } else {
@@ -579,7 +584,9 @@ impl State {
                 }
             }
         }
-        Ok(changed.len())
+        let moved = changed.len();
+        self.moved = changed;
+        Ok(moved)
     }
 
     fn stamp_edge(&mut self, e: usize) -> bool {
