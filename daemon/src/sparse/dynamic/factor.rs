@@ -107,7 +107,6 @@ impl<T: Scalar> DynamicLdlt<T> {
         threshold: SupernodalThreshold,
     ) -> Result<Self, FactorError> {
         let n = a.n();
-        let inv = crate::sparse::ordering::invert(perm);
         let params = CholeskySymbolicParams {
             supernodal_flop_ratio_threshold: threshold,
             supernodal_params: SymbolicSupernodalParams { relax: None },
@@ -115,7 +114,13 @@ impl<T: Scalar> DynamicLdlt<T> {
         };
         // the engine assembles its systems already in elimination order;
         // faer then skips permuting a copy of `a` in both analyses
-        let order = if perm.iter().enumerate().all(|(k, &i)| k == i) {
+        let identity = perm.iter().enumerate().all(|(k, &i)| k == i);
+        let inv = if identity {
+            Vec::new()
+        } else {
+            crate::sparse::ordering::invert(perm)
+        };
+        let order = if identity {
             SymmetricOrdering::Identity
         } else {
             SymmetricOrdering::Custom(faer::perm::PermRef::new_checked(perm, &inv, n))
@@ -156,10 +161,9 @@ impl<T: Scalar> DynamicLdlt<T> {
             SymbolicCholeskyRaw::Supernodal(s) => {
                 // supernode `s`: columns `begin..end`, a dense column-major
                 // block whose rows are its own columns (D on the diagonal, L
-                // below), then its pattern
-                // below the diagonal, column `c` holds the rows `begin + c +
-                // 1..end` (one run) and then the supernode's pattern, whose
-                // run starts are found once per supernode
+                // below), then its pattern. Below the diagonal, column `c`
+                // holds the rows `begin + c + 1..end` (one run) and then the
+                // pattern, whose run starts are found once per supernode
                 let (rows_at, vals_at, row_idx) = (s.col_ptr_for_row_idx(), s.col_ptr_for_val(), s.row_idx());
                 let (mut pattern, mut pattern_starts) = (Vec::new(), Vec::new());
                 f.cols.reserve(n);
