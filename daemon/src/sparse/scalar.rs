@@ -140,8 +140,8 @@ impl Scalar for c64 {
     }
 }
 
-/// Whether this CPU has AVX2 and FMA, the update kernels' fast path
-/// (`std` caches the answer).
+/// Whether this CPU has AVX2 and FMA, the fast path of the update
+/// kernels and of the back-substitution's sum (`std` caches the answer).
 #[cfg(target_arch = "x86_64")]
 #[inline]
 fn avx2_fma() -> bool {

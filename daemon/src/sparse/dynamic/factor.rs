@@ -114,15 +114,11 @@ impl<T: Scalar> DynamicLdlt<T> {
         };
         // the engine assembles its systems already in elimination order;
         // faer then skips permuting a copy of `a` in both analyses
-        let identity = perm.iter().enumerate().all(|(k, &i)| k == i);
-        let inv = if identity {
-            Vec::new()
-        } else {
-            crate::sparse::ordering::invert(perm)
-        };
-        let order = if identity {
+        let inv;
+        let order = if perm.iter().enumerate().all(|(k, &i)| k == i) {
             SymmetricOrdering::Identity
         } else {
+            inv = crate::sparse::ordering::invert(perm);
             SymmetricOrdering::Custom(faer::perm::PermRef::new_checked(perm, &inv, n))
         };
         let symbolic = factorize_symbolic_cholesky(a.symbolic(), Side::Upper, order, params)
