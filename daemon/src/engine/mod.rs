@@ -339,12 +339,16 @@ impl Engine {
             // nonlinearity check, or waited for there up to 104 s (W10000),
             // and City10000's run went on
             self.stats.drift_resolves += 1;
-            tracing::debug!("Agreeing loop closures rejected on arrival; re-solving inline.");
+            tracing::debug!(
+                keyframes = self.keyframe_count(),
+                "Agreeing loop closures rejected on arrival; re-solving inline."
+            );
             moved = self.resolve_inline(Polish::FullInline);
             resolved = true;
         } else if self.beyond(self.config.nonlinear_ratio, 1.0) || self.relinearise(&mut moved) {
             self.stats.nonlinear_resolves += 1;
             tracing::debug!(
+                keyframes = self.keyframe_count(),
                 chi2 = self.state.chi2(),
                 predicted = self.state.predicted_chi2(),
                 "Linearisation failed; re-solving inline."
@@ -498,6 +502,7 @@ impl Engine {
         }
         self.stats.relinearisations += 1;
         tracing::debug!(
+            keyframes = self.keyframe_count(),
             chi2 = self.state.chi2(),
             predicted = self.state.predicted_chi2(),
             "Linear model off; relinearising inline."
@@ -614,6 +619,7 @@ impl Engine {
             self.stats.resolve_seconds += outcome.seconds;
         }
         tracing::debug!(
+            keyframes = self.keyframe_count(),
             seconds = outcome.seconds,
             replayed,
             catch_up_seconds,
@@ -643,6 +649,11 @@ impl Engine {
 }
 
 impl Engine {
+    /// Keyframes received so far (for the debug log).
+    fn keyframe_count(&self) -> usize {
+        self.state.model.graph.keyframes().len()
+    }
+
     /// Records the fresh factor's size.
     fn after_resolve(&mut self) {
         self.nnz_after_resolve = self.state.factor_nnz();
