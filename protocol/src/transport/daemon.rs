@@ -21,6 +21,28 @@ use std::time::Duration;
 /// whenever two snapshots arrived between calls.
 const MAX_BORROWED: usize = 3;
 
+/// Opens or creates a frontend → daemon topic of `T` named `name`: up to
+/// `max_frontends` publishers, the daemon's subscriber and one spare, a
+/// queue of `buffer` samples, no history, and no safe overflow (a full
+/// queue never overwrites input).
+fn input_topic<T: std::fmt::Debug + ZeroCopySend>(
+    node: &Node<ipc::Service>,
+    namespace: &str,
+    name: &str,
+    max_frontends: usize,
+    buffer: usize,
+) -> Result<publish_subscribe::PortFactory<ipc::Service, T, ()>, TransportError> {
+    node.service_builder(&service_name(name)?)
+        .publish_subscribe::<T>()
+        .max_publishers(max_frontends)
+        .max_subscribers(2)
+        .subscriber_max_buffer_size(buffer)
+        .history_size(0)
+        .enable_safe_overflow(false)
+        .open_or_create_with_attributes(&protocol_attributes())
+        .map_err(|e| classify("create", namespace, name, &e))
+}
+
 /// One message from a frontend.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Input {
@@ -84,36 +106,11 @@ impl Ingress {
         let node = node("slamd-daemon", true)?;
         let cleaned = node.try_cleanup_dead_nodes().cleanups;
         let attrs = protocol_attributes();
-        let keyframes = node
-            .service_builder(&service_name(&names.keyframes)?)
-            .publish_subscribe::<Keyframe>()
-            .max_publishers(qos.max_frontends)
-            .max_subscribers(2)
-            .subscriber_max_buffer_size(qos.keyframe_buffer)
-            .history_size(0)
-            .enable_safe_overflow(false)
-            .open_or_create_with_attributes(&attrs)
-            .map_err(|e| classify("create", namespace, &names.keyframes, &e))?;
-        let edges = node
-            .service_builder(&service_name(&names.edges)?)
-            .publish_subscribe::<Edge>()
-            .max_publishers(qos.max_frontends)
-            .max_subscribers(2)
-            .subscriber_max_buffer_size(qos.edge_buffer)
-            .history_size(0)
-            .enable_safe_overflow(false)
-            .open_or_create_with_attributes(&attrs)
-            .map_err(|e| classify("create", namespace, &names.edges, &e))?;
-        let gps = node
-            .service_builder(&service_name(&names.gps)?)
-            .publish_subscribe::<GpsFix>()
-            .max_publishers(qos.max_frontends)
-            .max_subscribers(2)
-            .subscriber_max_buffer_size(qos.gps_buffer)
-            .history_size(0)
-            .enable_safe_overflow(false)
-            .open_or_create_with_attributes(&attrs)
-            .map_err(|e| classify("create", namespace, &names.gps, &e))?;
+        let frontends = qos.max_frontends;
+        let keyframes =
+            input_topic::<Keyframe>(&node, namespace, &names.keyframes, frontends, qos.keyframe_buffer)?;
+        let edges = input_topic::<Edge>(&node, namespace, &names.edges, frontends, qos.edge_buffer)?;
+        let gps = input_topic::<GpsFix>(&node, namespace, &names.gps, frontends, qos.gps_buffer)?;
         let poses = node
             .service_builder(&service_name(&names.poses)?)
             .publish_subscribe::<[Pose]>()
