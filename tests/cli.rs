@@ -15,6 +15,37 @@ fn solve_json_reports_the_required_fields() {
     assert!(v["ate"].is_null(), "no ground truth given");
 }
 
+/// Issue 3's fields, the optimum at the end, and the engine's counters:
+/// every inline re-solve and the closing one count among the re-solves.
+#[test]
+fn replay_json_reports_the_required_fields_and_the_engines_counters() {
+    let file = dataset("intel_sesync.g2o");
+    let v = run_json(&["replay", file.to_str().expect("utf-8"), "--embedded", "--json"]);
+    assert_eq!(v["edges"], 2512);
+    let (p50, p99, max) = (&v["p50_us"], &v["p99_us"], &v["max_us"]);
+    let (p50, p99, max) = (
+        p50.as_f64().expect("p50"),
+        p99.as_f64().expect("p99"),
+        max.as_f64().expect("max"),
+    );
+    assert!(0.0 < p50 && p50 <= p99 && p99 <= max, "{p50} {p99} {max}");
+    assert!(v["total_s"].as_f64().expect("total_s") > 0.0);
+    let chi2 = v["chi2"].as_f64().expect("chi2");
+    assert!(chi2 <= 1.001 * 45.005, "{chi2}");
+    let count = |key: &str| {
+        v["engine"][key]
+            .as_u64()
+            .unwrap_or_else(|| panic!("engine.{key} in {v}"))
+    };
+    let resolves = v["resolves"].as_u64().expect("resolves");
+    assert!(
+        resolves > count("nonlinear_resolves") + count("drift_resolves"),
+        "{resolves} re-solves: {v}"
+    );
+    assert!(count("refreshes") > 0, "a 1,728-keyframe stream refreshes: {v}");
+    assert_eq!(count("recoveries"), 0, "no downdate fails on clean data: {v}");
+}
+
 #[test]
 fn solve_with_ground_truth_reports_ate_and_writes_outputs() {
     let dir = std::env::temp_dir().join(format!("slamd-cli-{}", std::process::id()));

@@ -13,7 +13,7 @@ use anyhow::{bail, Context};
 use clap::Args;
 use faer::c64;
 use slamd::config::Config;
-use slamd::engine::{EdgeInput, Engine, EngineConfig, FixInput, SnapshotSource};
+use slamd::engine::{EdgeInput, Engine, EngineConfig, EngineStats, FixInput, SnapshotSource};
 use slamd::geometry::Pose2;
 use slamd::graph::{chi2, KeyframeId, PoseGraph};
 use slamd::io;
@@ -138,6 +138,10 @@ pub trait Sink {
     fn switches(&mut self) -> Option<Vec<f64>>;
     /// "embedded" or "daemon".
     fn mode(&self) -> &'static str;
+    /// The engine's counters, when it runs in this process.
+    fn engine_stats(&self) -> Option<EngineStats> {
+        None
+    }
 }
 
 /// The engine in this process.
@@ -185,6 +189,10 @@ impl Sink for EmbeddedSink {
 
     fn mode(&self) -> &'static str {
         "embedded"
+    }
+
+    fn engine_stats(&self) -> Option<EngineStats> {
+        Some(self.0.stats())
     }
 }
 
@@ -538,6 +546,13 @@ pub fn run(opts: ReplayOpts) -> anyhow::Result<()> {
             "total_s": out.total_s,
             "closing_s": out.closing_s,
             "resolves": out.resolves,
+            "engine": sink.engine_stats().map(|s| serde_json::json!({
+                "refreshes": s.refreshes,
+                "relinearisations": s.relinearisations,
+                "nonlinear_resolves": s.nonlinear_resolves,
+                "drift_resolves": s.drift_resolves,
+                "recoveries": s.recoveries,
+            })),
             "chi2": final_chi2,
             "ate": ate,
             "prefixes_checked": out.checked.len(),
