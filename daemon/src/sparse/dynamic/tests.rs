@@ -679,3 +679,69 @@ proptest! {
         }
     }
 }
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 64, ..ProptestConfig::default() })]
+
+    /// A factor grown by updates (fill included), refactorised in place
+    /// for new values on its own pattern, is the factor of the new
+    /// matrix; an entry outside its pattern is refused by name.
+    #[test]
+    fn refactor_in_place_matches_the_new_matrix(
+        n in 2usize..25,
+        seed in prop::collection::vec((0usize..40, 0usize..40, -1.0..1.0f64), 0..40),
+        updates in prop::collection::vec(prop::collection::vec((0usize..40, -1.0..1.0f64), 1..4), 0..6),
+        factors in prop::collection::vec(0.5..2.0f64, 64),
+        p in any::<u64>(),
+    ) {
+        let seed: Vec<_> = seed.iter().map(|&(i, j, a)| (i, j, a, 0.0)).collect();
+        let (a, _) = start::<f64>(n, &seed);
+        let mut perm: Vec<usize> = (0..n).collect();
+        perm.sort_by_key(|&i| (i as u64).wrapping_mul(p | 1).rotate_left(17));
+        let mut f = DynamicLdlt::<f64>::from_matrix(&a, &perm).unwrap();
+        for u in &updates {
+            let mut w: Vec<(usize, f64)> = Vec::new();
+            for &(i, x) in u {
+                if w.iter().all(|&(c, _)| c != i % n) {
+                    w.push((i % n, x));
+                }
+            }
+            f.rank_k_with(&[&w], 1.0, |_, _| {}).unwrap();
+        }
+        // new values on the current matrix's pattern (in elimination
+        // order), kept positive definite by a dominant diagonal
+        let now = f.to_dense();
+        let mut entries = Vec::new();
+        for c in 0..n {
+            let mut row_sum = 0.0;
+            for r in 0..n {
+                if r != c && now[r][c] != 0.0 {
+                    let v = now[r][c] * factors[(r + c) % factors.len()];
+                    row_sum += v.abs();
+                    if r < c {
+                        entries.push((r, c, v));
+                    }
+                }
+            }
+            entries.push((c, c, row_sum + factors[c % factors.len()]));
+        }
+        let b = UpperCsc::from_triplets(n, &entries);
+        let mut want = DMatrix::<c64>::zeros(n, n);
+        for &(r, c, v) in &entries {
+            want[(r, c)] = c64::new(v, 0.0);
+            want[(c, r)] = c64::new(v, 0.0);
+        }
+        let nnz = f.nnz();
+        f.refactor(&b).map_err(|e| TestCaseError::fail(e.to_string()))?;
+        prop_assert_eq!(f.nnz(), nnz, "the pattern stays");
+        prop_assert!(close(&to_c(&f.to_dense()), &want, 1e-10), "L D Lᴴ is not the new matrix");
+        // a pair of columns the pattern does not couple, if any
+        let outside = (0..n).flat_map(|c| (c + 1..n).map(move |r| (c, r))).find(|&(c, r)| !f.column(c).0.contains(&(r as u32)));
+        if let Some((c, r)) = outside {
+            let mut more = entries.clone();
+            more.push((c, r, 1e-3));
+            let err = f.refactor(&UpperCsc::from_triplets(n, &more)).unwrap_err();
+            prop_assert!(matches!(err, crate::sparse::FactorError::OutsidePattern { .. }), "{err}");
+        }
+    }
+}
