@@ -77,9 +77,22 @@ impl GaussNewton {
         for (b, &k) in order.iter().enumerate() {
             block_of[k] = b as u32;
         }
-        let (h, b, lin_chi2) = system(graph, edges, priors, &lin, &block_of, order.len());
+        let scaled: Vec<Edge> = edges
+            .iter()
+            .map(|&(e, s)| {
+                let mut edge = graph.edges()[e];
+                edge.information = edge.information.scaled(s);
+                edge
+            })
+            .collect();
+        let structure = HessianStructure::new(block_of.clone(), order.len(), &scaled);
+        let mut h = structure.pattern().clone();
+        let mut g = vec![0.0; structure.dim()];
+        structure.assemble(&scaled, None, priors, &lin, &mut h, &mut g);
         let identity: Vec<usize> = (0..h.n()).collect();
         let factor = DynamicLdlt::from_matrix(&h, &identity)?;
+        let b: Vec<f64> = g.iter().map(|v| -v).collect();
+        let lin_chi2 = Problem::new(&scaled, priors).chi2(&lin);
         let chol = AugmentedCholesky::new(factor, &b, lin_chi2);
         let column = block_of
             .iter()
@@ -102,43 +115,6 @@ impl GaussNewton {
             gn.refresh_estimate(*k);
         }
         Ok(gn)
-    }
-
-    /// Relinearises at `lin` in place: every keyframe keeps its columns,
-    /// the factor its ordering and pattern, and only the values are new
-    /// ([`AugmentedCholesky::refactor`]: no ordering, no symbolic analysis,
-    /// no allocation per column, where [`Self::build`] does all three).
-    /// `edges` and `priors` must be the ones in the factor. The estimate
-    /// becomes one Gauss–Newton step from `lin`. On error the system must
-    /// be built afresh.
-    pub fn relinearise(
-        &mut self,
-        graph: &PoseGraph,
-        edges: &[(usize, f64)],
-        priors: &[PositionPrior],
-        lin: Vec<Pose2>,
-    ) -> Result<(), FactorError> {
-        // what waits for a walk is in `edges`, and its fill must be in the
-        // pattern before the values go in
-        self.flush()
-            .map_err(|e| FactorError::NotPositiveDefinite { step: e.column })?;
-        let n = graph.len().max(self.column.len());
-        self.column.resize(n, NONE);
-        self.stamp.resize(n, 0);
-        let block_of: Vec<u32> = self
-            .column
-            .iter()
-            .map(|&c| if c == NONE { NONE } else { c / 3 })
-            .collect();
-        let (h, b, lin_chi2) = system(graph, edges, priors, &lin, &block_of, self.chol.len() / 3);
-        self.chol.refactor(&h, &b, lin_chi2)?;
-        self.estimate = lin.clone();
-        self.lin = lin;
-        self.changed.clear();
-        for k in 0..n {
-            self.refresh_estimate(k);
-        }
-        Ok(())
     }
 
     /// Keyframe `k` joins at `guess`. Keyframes that have not joined keep
@@ -343,33 +319,6 @@ impl GaussNewton {
     pub fn factor_nnz(&self) -> usize {
         self.chol.factor().nnz()
     }
-}
-
-/// The normal equations at `lin` with keyframe `k` in block `block_of[k]`
-/// (`NONE`: not in the system) of `blocks`: the upper triangle of `H`,
-/// `b = −g` and `χ²(lin)`. Each edge counts with its scale.
-fn system(
-    graph: &PoseGraph,
-    edges: &[(usize, f64)],
-    priors: &[PositionPrior],
-    lin: &[Pose2],
-    block_of: &[u32],
-    blocks: usize,
-) -> (crate::sparse::UpperCsc<f64>, Vec<f64>, f64) {
-    let scaled: Vec<Edge> = edges
-        .iter()
-        .map(|&(e, s)| {
-            let mut edge = graph.edges()[e];
-            edge.information = edge.information.scaled(s);
-            edge
-        })
-        .collect();
-    let structure = HessianStructure::new(block_of.to_vec(), blocks, &scaled);
-    let mut h = structure.pattern().clone();
-    let mut g = vec![0.0; structure.dim()];
-    structure.assemble(&scaled, None, priors, lin, &mut h, &mut g);
-    let b = g.iter().map(|v| -v).collect();
-    (h, b, Problem::new(&scaled, priors).chi2(lin))
 }
 
 /// A square root `L` of an information matrix, `Ω = L Lᵀ` (Cholesky; the

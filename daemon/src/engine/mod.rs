@@ -507,10 +507,7 @@ impl Engine {
             predicted = self.state.predicted_chi2(),
             "Linear model off; relinearising inline."
         );
-        if let Err(e) = self.state.relinearise() {
-            tracing::debug!(error = %e, "Relinearising in place failed; refactorising.");
-            self.rebuild_inline(Polish::None);
-        }
+        self.rebuild_inline(Polish::None);
         *moved = (*moved).max(self.solve());
         self.beyond(self.config.relinearise_ratio, RELINEARISE_SLACK)
     }

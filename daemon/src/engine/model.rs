@@ -61,15 +61,6 @@ impl Model {
         }
     }
 
-    /// The applied edges of nonzero weight, with their weights: what a
-    /// factor of the model holds.
-    pub(super) fn weighted_edges(&self) -> Vec<(usize, f64)> {
-        (0..self.graph.edges().len())
-            .filter(|&e| self.applied[e] && self.weight(e) > 0.0)
-            .map(|e| (e, self.weight(e)))
-            .collect()
-    }
-
     /// The prior of fix `f` under the current georeference.
     pub(super) fn prior(&self, f: usize) -> Option<PositionPrior> {
         let g = self.georef.as_ref()?;

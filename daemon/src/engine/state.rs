@@ -711,7 +711,10 @@ impl State {
         let (recent, source, linear) = (config.recent_last, config.snapshot, config.linear_stages);
         let n = model.graph.len();
         let (joined, compact) = model.compact_joined();
-        let active = model.weighted_edges();
+        let active: Vec<(usize, f64)> = (0..model.graph.edges().len())
+            .filter(|&e| model.applied[e] && model.weight(e) > 0.0)
+            .map(|e| (e, model.weight(e)))
+            .collect();
         // every fix on a joined keyframe enters the fresh factor
         let mut priors = Vec::new();
         for f in 0..model.fixes.len() {
@@ -755,30 +758,6 @@ impl State {
             None => lin,
         };
         Ok(State::assemble(config, model, gn, linear, offset, estimate))
-    }
-
-    /// Relinearises the Gauss–Newton system at the estimate in place: its
-    /// ordering and pattern kept, new values, one Gauss–Newton step
-    /// ([`GaussNewton::relinearise`]); what [`Self::rebuild`] without a
-    /// polish gives, less the fresh ordering. Nothing to do for the linear
-    /// source. On error the state must be rebuilt.
-    pub fn relinearise(&mut self) -> Result<(), FactorError> {
-        let Some(gn) = self.gn.as_mut() else {
-            return Ok(());
-        };
-        let m = &self.model;
-        let active = m.weighted_edges();
-        let priors: Vec<_> = (0..m.fixes.len())
-            .filter(|&f| m.fix_applied[f])
-            .filter_map(|f| m.prior(f))
-            .collect();
-        let mut lin = self.estimate.clone();
-        lin.resize(m.graph.len(), Pose2::IDENTITY);
-        gn.relinearise(&m.graph, &active, &priors, lin)?;
-        self.estimate.clear();
-        self.estimate.extend_from_slice(gn.estimate());
-        self.recompute_chi2();
-        Ok(())
     }
 
     /// A copy of the model, for a rebuild elsewhere.
@@ -855,50 +834,6 @@ mod tests {
         hinted.join_pending().unwrap();
         let k2 = hinted.estimate()[2];
         assert!(close(hinted.estimate()[3], k2.compose(&step)));
-    }
-
-    /// Relinearising in place gives what a rebuild without a polish gives
-    /// (the same normal equations at the same point in another ordering):
-    /// the same estimate and predicted χ², the factor's pattern kept.
-    #[test]
-    fn relinearising_in_place_matches_a_rebuild() {
-        let config = EngineConfig::default();
-        // a turning chain closed by a loop closure a metre and 0.2 rad off
-        // the odometry, so that the step lands away from where it was
-        // linearised
-        let mut state = State::new(&config);
-        for k in 0..12 {
-            state.replay(&keyframe(k), 0.0).unwrap();
-            if k > 0 {
-                state
-                    .replay(&odometry(k - 1, k, Pose2::new(1.0, 0.0, 0.5)), 0.0)
-                    .unwrap();
-            }
-        }
-        let z = Pose2::new(-0.2, 1.5, 0.9);
-        let closure = EdgeInput::new(0, 11, z, Information::identity(), EdgeKind::LoopClosure);
-        state.replay(&Op::Edge(closure), 0.0).unwrap();
-        state.solve(0.0).unwrap();
-        let before = state.predicted_chi2().unwrap();
-        let estimate = state.estimate().to_vec();
-        let rebuilt = State::rebuild(state.model.clone(), &estimate, Polish::None, &config).unwrap();
-        let nnz = state.factor_nnz();
-        state.relinearise().unwrap();
-        assert_eq!(state.factor_nnz(), nnz);
-        let near = |a: f64, b: f64| (a - b).abs() <= 1e-9 * a.abs().max(1.0);
-        for (a, b) in state.estimate().iter().zip(rebuilt.estimate()) {
-            assert!(
-                near(a.x, b.x) && near(a.y, b.y) && near(a.theta, b.theta),
-                "{a:?} vs {b:?}"
-            );
-        }
-        let after = state.predicted_chi2().unwrap();
-        assert!(near(after, rebuilt.predicted_chi2().unwrap()), "{after}");
-        assert!(near(state.chi2(), rebuilt.chi2()));
-        assert!(
-            !near(after, before),
-            "a new linearisation predicts anew: {before} {after}"
-        );
     }
 
     /// Six keyframes 1 m apart along x, then two loop closures from 0 to

@@ -26,12 +26,6 @@ pub enum FactorError {
     },
     /// The symbolic analysis failed (index overflow).
     Symbolic,
-    /// A refactorisation in place met an entry outside the factor's
-    /// pattern (in column `step`).
-    OutsidePattern {
-        /// The column.
-        step: usize,
-    },
 }
 
 impl fmt::Display for FactorError {
@@ -41,9 +35,6 @@ impl fmt::Display for FactorError {
                 write!(f, "normal equations are not positive definite (pivot {step})")
             }
             FactorError::Symbolic => f.write_str("symbolic Cholesky analysis failed"),
-            FactorError::OutsidePattern { step } => {
-                write!(f, "an entry outside the factor's pattern (column {step})")
-            }
         }
     }
 }

@@ -17,7 +17,7 @@
 use super::factor::DynamicLdlt;
 use super::solve::wildfire;
 use super::update::UpdateError;
-use crate::sparse::{FactorError, Scalar};
+use crate::sparse::Scalar;
 
 /// An augmented dynamic factor and the solution it gives.
 #[derive(Clone, Debug)]
@@ -61,21 +61,6 @@ impl<T: Scalar> AugmentedCholesky<T> {
         };
         s.solve_full();
         s
-    }
-
-    /// Refactorises for a new `A` of the same pattern and ordering, then
-    /// augments with `b` and `β` and solves ([`DynamicLdlt::refactor`]).
-    /// On error the system must be rebuilt.
-    pub fn refactor(
-        &mut self,
-        a: &crate::sparse::UpperCsc<T>,
-        b: &[T],
-        beta: f64,
-    ) -> Result<(), FactorError> {
-        self.factor.refactor(a)?;
-        self.factor.augment(b, beta);
-        self.solve_full();
-        Ok(())
     }
 
     /// An empty system (no variables, `β = 0`).

@@ -13,8 +13,6 @@
 //!   where the updates carry the right-hand side and the forward solve rides
 //!   along their walks (the Gauss–Newton system, whose `b` changes only with
 //!   its updates);
-//! - [`refactor`](DynamicLdlt::refactor) puts new values into the same
-//!   pattern and ordering (a relinearisation), with no symbolic work;
 //! - [`Marginal`] reads `Vᵀ A⁻¹ V` for three sparse vectors off the paths
 //!   of their columns (an edge's predicted-error covariance).
 //!
@@ -28,7 +26,6 @@
 mod augmented;
 mod factor;
 mod marginal;
-mod refactor;
 pub(crate) mod runs;
 mod solve;
 mod update;
