@@ -911,4 +911,33 @@ mod tests {
             assert!((s[3][5].x - 5.0).abs() < 1e-9, "{:?}", s[3][5]);
         }
     }
+
+    /// The start under no switches rescues loop closures held wrong; a
+    /// scheduled re-solve takes it only while one is (below 0.5), the
+    /// closing one whenever a switch is below 1.
+    #[test]
+    fn a_scheduled_resolve_takes_the_rescue_start_only_while_one_is_held_wrong() {
+        let config = EngineConfig::default();
+        let mut state = line_closed(&config, 5.0);
+        let wrong = 6;
+        let mut counts = |switch: f64| {
+            state.model.switch[wrong] = switch;
+            let (joined, compact) = state.model.compact_joined();
+            let (_, ids) = state.model.compact_edges(&compact, |m, e| m.scale[e]);
+            let initial: Vec<Pose2> = joined.iter().map(|&k| state.estimate()[k]).collect();
+            let starts = |polish| {
+                state
+                    .model
+                    .starts(&config, &compact, &joined, &initial, &ids, polish)
+                    .len()
+            };
+            (starts(Polish::Full), starts(Polish::FullInline))
+        };
+        // held wrong: the estimate, under the switches, under none
+        assert_eq!(counts(0.3), (3, 3));
+        // only down-weighted: the scheduled re-solve skips the rescue
+        assert_eq!(counts(0.7), (2, 3));
+        // every switch at 1: neither takes it
+        assert_eq!(counts(1.0), (2, 2));
+    }
 }
