@@ -16,11 +16,20 @@ fn solve_json_reports_the_required_fields() {
 }
 
 /// Issue 3's fields, the optimum at the end, and the engine's counters:
-/// every inline re-solve and the closing one count among the re-solves.
+/// every inline re-solve and the closing one count among the re-solves;
+/// the trace's per-keyframe work adds up to no more than the total.
 #[test]
 fn replay_json_reports_the_required_fields_and_the_engines_counters() {
     let file = dataset("intel_sesync.g2o");
-    let v = run_json(&["replay", file.to_str().expect("utf-8"), "--embedded", "--json"]);
+    let trace = std::env::temp_dir().join(format!("slamd-trace-{}.txt", std::process::id()));
+    let v = run_json(&[
+        "replay",
+        file.to_str().expect("utf-8"),
+        "--embedded",
+        "--json",
+        "--trace",
+        trace.to_str().expect("utf-8"),
+    ]);
     assert_eq!(v["edges"], 2512);
     let (p50, p99, max) = (&v["p50_us"], &v["p99_us"], &v["max_us"]);
     let (p50, p99, max) = (
@@ -44,6 +53,27 @@ fn replay_json_reports_the_required_fields_and_the_engines_counters() {
     );
     assert!(count("refreshes") > 0, "a 1,728-keyframe stream refreshes: {v}");
     assert_eq!(count("recoveries"), 0, "no downdate fails on clean data: {v}");
+    // one line per keyframe with edges: k, latency, walked, solved, nnz
+    let lines = std::fs::read_to_string(&trace).expect("the trace");
+    let _ = std::fs::remove_file(&trace);
+    let rows: Vec<Vec<f64>> = (lines.lines())
+        .map(|l| l.split(' ').map(|f| f.parse().expect("a number")).collect())
+        .collect();
+    assert_eq!(rows.len(), 1727, "every keyframe after the gauge");
+    assert!(
+        rows.iter().all(|r| r.len() == 5),
+        "{:?}",
+        rows.iter().find(|r| r.len() != 5)
+    );
+    let (walked, solved) = (count("walked_entries"), count("solved_entries"));
+    let sum = |c: usize| rows.iter().map(|r| r[c]).sum::<f64>() as u64;
+    assert!(0 < sum(2) && sum(2) <= walked, "trace {} vs {walked}", sum(2));
+    assert!(0 < sum(3) && sum(3) <= solved, "trace {} vs {solved}", sum(3));
+    let nnz = rows.last().expect("rows")[4];
+    assert!(
+        nnz > 1728.0 * 3.0,
+        "the factor holds more than its diagonal: {nnz}"
+    );
 }
 
 #[test]

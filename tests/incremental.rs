@@ -7,7 +7,7 @@
 //!   within 1.3× of their prefix's optimum, the optimum after a re-solve.
 
 use proptest::prelude::*;
-use slamd::engine::{EdgeInput, Engine, EngineConfig, EngineError, SnapshotSource};
+use slamd::engine::{EdgeInput, Engine, EngineConfig, EngineError, FactorWork, SnapshotSource};
 use slamd::geometry::Pose2;
 use slamd::graph::{chi2, EdgeKind, GraphError, Information, Keyframe, PoseGraph};
 use slamd::linear::two_stage::{self, PositionWeights};
@@ -206,6 +206,40 @@ fn snapshots_stay_near_their_prefix_optimum_and_the_end_is_optimal() {
     let end = chi2(&g, &snapshot_poses(&engine));
     let best = optimum(&g);
     assert!(end <= 1.001 * best, "after the re-solve: {end} vs {best}");
+}
+
+/// The work counters are the foreground's in all: they never fall back
+/// when a rebuilt state takes over (its own counters start again), and
+/// each keyframe with edges adds to them.
+#[test]
+fn the_work_counters_add_up_across_rebuilds() {
+    let g = read("manhattanolson3500_g2oversion.g2o").prefix(600);
+    let config = EngineConfig {
+        background: false,
+        ..EngineConfig::default()
+    };
+    let (mut last, mut grew) = (FactorWork::default(), 0);
+    let (mut engine, _) = replay(&g, config, |k, engine| {
+        let w = engine.stats().work;
+        assert!(
+            w.walked >= last.walked && w.solved >= last.solved,
+            "keyframe {k}: {w:?} after {last:?}"
+        );
+        grew += usize::from(w.walked > last.walked && w.solved > last.solved);
+        last = w;
+    });
+    let stats = engine.stats();
+    assert!(
+        stats.resolves + stats.refreshes + stats.relinearisations > 0,
+        "the prefix rebuilds its state: {stats:?}"
+    );
+    assert!(grew >= 590, "{grew} of 599 keyframes added work");
+    engine.resolve_now();
+    let end = engine.stats().work;
+    assert!(
+        end.walked >= last.walked && end.solved >= last.solved,
+        "{end:?} after {last:?}"
+    );
 }
 
 #[test]

@@ -55,7 +55,7 @@ mod state;
 
 pub use config::EngineConfig;
 pub use snapshot::Snapshot;
-pub use state::{Op, SnapshotSource};
+pub use state::{FactorWork, Op, SnapshotSource};
 
 use crate::geometry::Pose2;
 use crate::gps::{covariance, Geodetic, GpsError, GpsFix, LocalFrame};
@@ -205,6 +205,10 @@ pub struct EngineStats {
     /// Their χ² at the estimate (at most `defer_budget` times the
     /// estimate's).
     pub deferred_chi2: f64,
+    /// What the updates and solves on this thread have swept of the
+    /// Gauss–Newton factors so far (a re-solve's catch-up on its own
+    /// thread not counted).
+    pub work: FactorWork,
 }
 
 /// The incremental pose-graph solver.
@@ -226,6 +230,10 @@ pub struct Engine {
     frame: Option<LocalFrame>,
     /// Fixes in the estimate at the last re-solve.
     fixes_at_resolve: usize,
+    /// This thread's work on the states it replaced, and the current
+    /// state's work when it took over.
+    work_done: FactorWork,
+    work_base: FactorWork,
 }
 
 impl Engine {
@@ -244,6 +252,8 @@ impl Engine {
             stats: EngineStats::default(),
             frame: config.gps.origin.map(LocalFrame::new),
             fixes_at_resolve: 0,
+            work_done: FactorWork::default(),
+            work_base: FactorWork::default(),
             config,
         }
     }
@@ -438,10 +448,13 @@ impl Engine {
     /// Work counters.
     pub fn stats(&self) -> EngineStats {
         let (deferred, deferred_chi2) = self.state.deferred();
+        let mut work = self.work_done;
+        work += self.state.work() - self.work_base;
         EngineStats {
             factor_nnz: self.state.factor_nnz(),
             deferred,
             deferred_chi2,
+            work,
             ..self.stats
         }
     }
@@ -593,6 +606,7 @@ impl Engine {
             return false;
         };
         // the ops it missed join where this state's solves put them
+        let base = state.work();
         state.set_hints(self.state.estimate(), &self.state.model.joined);
         let (caught_up, mut replayed) = (Instant::now(), 0);
         for (seq, op) in log {
@@ -610,7 +624,7 @@ impl Engine {
         }
         let catch_up_seconds = caught_up.elapsed().as_secs_f64();
         state.clear_hints();
-        retire(std::mem::replace(&mut self.state, state));
+        self.replace_state(state, base);
         self.after_resolve();
         if outcome.polish == Polish::None {
             self.stats.refreshes += 1;
@@ -636,7 +650,8 @@ impl Engine {
         let (model, start) = (self.state.model().clone(), self.state.estimate());
         match State::rebuild(model, start, polish, &self.config) {
             Ok(state) => {
-                retire(std::mem::replace(&mut self.state, state));
+                let base = state.work();
+                self.replace_state(state, base);
                 if polish != Polish::None {
                     self.after_resolve();
                     self.edges_since_resolve = 0;
@@ -649,6 +664,14 @@ impl Engine {
 }
 
 impl Engine {
+    /// Makes `state` current; its work counters stood at `base` when this
+    /// thread's work on it began.
+    fn replace_state(&mut self, state: State, base: FactorWork) {
+        self.work_done += self.state.work() - self.work_base;
+        self.work_base = base;
+        retire(std::mem::replace(&mut self.state, state));
+    }
+
     /// Keyframes received so far (for the debug log).
     fn keyframe_count(&self) -> usize {
         self.state.model.graph.keyframes().len()

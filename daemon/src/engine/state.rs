@@ -18,6 +18,33 @@ use crate::sparse::ordering::amd_newest_last;
 use crate::sparse::FactorError;
 use std::sync::atomic::AtomicBool;
 
+/// Entries of `L` a factor's update walks swept and its back-substitutions
+/// read: the work behind a snapshot, measured without a clock.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct FactorWork {
+    /// Swept by update walks (a column's rows, once per walk).
+    pub walked: u64,
+    /// Read by back-substitutions.
+    pub solved: u64,
+}
+
+impl std::ops::Sub for FactorWork {
+    type Output = FactorWork;
+    fn sub(self, base: FactorWork) -> FactorWork {
+        FactorWork {
+            walked: self.walked.saturating_sub(base.walked),
+            solved: self.solved.saturating_sub(base.solved),
+        }
+    }
+}
+
+impl std::ops::AddAssign for FactorWork {
+    fn add_assign(&mut self, more: FactorWork) {
+        self.walked += more.walked;
+        self.solved += more.solved;
+    }
+}
+
 /// The model plus the solvers and the cached χ².
 #[derive(Clone, Debug)]
 pub struct State {
@@ -643,6 +670,15 @@ impl State {
     /// that is the source.
     pub fn predicted_chi2(&self) -> Option<f64> {
         self.gn.as_ref().map(|g| g.predicted_chi2())
+    }
+
+    /// What the Gauss–Newton factor's update walks and back-substitutions
+    /// have swept so far (zero without one).
+    pub fn work(&self) -> FactorWork {
+        self.gn.as_ref().map_or(FactorWork::default(), |g| FactorWork {
+            walked: g.factor().walk_stats().entries,
+            solved: g.solve_stats().entries,
+        })
     }
 
     /// Stored entries of the factor behind the published estimate.

@@ -102,7 +102,7 @@ pub fn run(opts: DemoOpts) -> anyhow::Result<()> {
         ProgressStyle::with_template("{bar:40} {pos}/{len} keyframes  {per_sec}  eta {eta}")
             .expect("valid template"),
     );
-    let out = replay(&graph, &[], &mut sink, &[], |_| bar.inc(1))?;
+    let out = replay(&graph, &[], &mut sink, &[], false, |_| bar.inc(1))?;
     bar.finish_and_clear();
     drop(sink);
     let status = daemon.stop()?;

@@ -13,7 +13,7 @@ use anyhow::{bail, Context};
 use clap::Args;
 use faer::c64;
 use slamd::config::Config;
-use slamd::engine::{EdgeInput, Engine, EngineConfig, EngineStats, FixInput, SnapshotSource};
+use slamd::engine::{EdgeInput, Engine, EngineConfig, EngineStats, FactorWork, FixInput, SnapshotSource};
 use slamd::geometry::Pose2;
 use slamd::graph::{chi2, KeyframeId, PoseGraph};
 use slamd::io;
@@ -77,7 +77,9 @@ pub struct ReplayOpts {
     /// Write the final estimate: `.g2o` as a graph, else `id x y theta`.
     #[arg(long)]
     pub out: Option<PathBuf>,
-    /// Write one line per keyframe (`k chi2 latency_us`).
+    /// Write one line per keyframe: `k latency_us`, and with `--embedded`
+    /// the entries of the factor its update walks swept and its
+    /// back-substitutions read, and the factor's entries after it.
     #[arg(long)]
     pub trace: Option<PathBuf>,
     /// Print one JSON object instead of a table.
@@ -391,6 +393,9 @@ pub struct Outcome {
     /// Georeferenced (east, north) of the final estimate, by keyframe id.
     pub enu: HashMap<KeyframeId, c64>,
     pub trace: Vec<(usize, f64)>,
+    /// When asked for, per keyframe: the engine's work on it and the
+    /// factor's entries after it (embedded only).
+    pub work: Vec<(usize, FactorWork, usize)>,
     pub total_s: f64,
     /// Of `total_s`, the seconds from the last keyframe's snapshot to the
     /// closing estimate (the re-solve that ends the stream).
@@ -408,15 +413,23 @@ pub fn replay(
     fixes: &[FixInput],
     sink: &mut dyn Sink,
     checkpoints: &[usize],
+    record_work: bool,
     mut progress: impl FnMut(usize),
 ) -> anyhow::Result<Outcome> {
     let mut latencies = Vec::with_capacity(graph.len());
+    let mut work = Vec::new();
+    let mut before = FactorWork::default();
     let mut checked = Vec::new();
     let steps = stream(graph, fixes);
     let sent: Vec<usize> = steps.iter().flat_map(|s| s.file_index.iter().copied()).collect();
     let start = Instant::now();
     for (k, step) in steps.iter().enumerate() {
         latencies.extend(sink.keyframe(k, step)?);
+        // counting the factor's entries walks its columns: only on request
+        if let Some(stats) = record_work.then(|| sink.engine_stats()).flatten() {
+            work.push((k, stats.work - before, stats.factor_nnz));
+            before = stats.work;
+        }
         if checkpoints.contains(&k) {
             latencies.extend(sink.drain()?);
             let by_id = sink.poses()?;
@@ -457,6 +470,7 @@ pub fn replay(
         enu,
         switches,
         trace: latencies.clone(),
+        work,
         latencies: latencies.into_iter().map(|(_, l)| l).collect(),
         total_s,
         closing_s,
@@ -496,7 +510,14 @@ pub fn run(opts: ReplayOpts) -> anyhow::Result<()> {
     };
     let gps = crate::gps::load(&opts.gps, &graph)?;
     let fixes = gps.as_ref().map_or(&[][..], |g| &g.wire[..]);
-    let out = replay(&graph, fixes, sink.as_mut(), &checkpoints, |_| {})?;
+    let out = replay(
+        &graph,
+        fixes,
+        sink.as_mut(),
+        &checkpoints,
+        opts.trace.is_some(),
+        |_| {},
+    )?;
     let enu_rmse = gps.as_ref().and_then(|g| {
         let enu: HashMap<usize, c64> = (out.enu.iter())
             .filter_map(|(id, p)| Some((graph.index_of(*id)?, *p)))
@@ -504,7 +525,14 @@ pub fn run(opts: ReplayOpts) -> anyhow::Result<()> {
         crate::gps::rmse(&g.truth, |k| enu.get(&k).copied())
     });
     if let Some(path) = &opts.trace {
-        let lines: Vec<String> = out.trace.iter().map(|(k, l)| format!("{k} {l:.1}")).collect();
+        let work: HashMap<usize, (FactorWork, usize)> =
+            out.work.iter().map(|&(k, w, n)| (k, (w, n))).collect();
+        let lines: Vec<String> = (out.trace.iter())
+            .map(|(k, l)| match work.get(k) {
+                Some((w, nnz)) => format!("{k} {l:.1} {} {} {nnz}", w.walked, w.solved),
+                None => format!("{k} {l:.1}"),
+            })
+            .collect();
         std::fs::write(path, lines.join("\n") + "\n")
             .with_context(|| format!("writing {}", path.display()))?;
     }
@@ -552,6 +580,8 @@ pub fn run(opts: ReplayOpts) -> anyhow::Result<()> {
                 "nonlinear_resolves": s.nonlinear_resolves,
                 "drift_resolves": s.drift_resolves,
                 "recoveries": s.recoveries,
+                "walked_entries": s.work.walked,
+                "solved_entries": s.work.solved,
             })),
             "chi2": final_chi2,
             "ate": ate,
