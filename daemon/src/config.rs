@@ -22,7 +22,7 @@
 //! initial_poses = 16384        # snapshot size reserved at start (it grows)
 //! backpressure_ms = 200        # a frontend's send waits this long on a full queue
 //! tick_ms = 250                # dead-node cleanup and idle work
-//! # cpu = 0                    # pin the IPC and engine threads (re-solves run anywhere)
+//! # cpu = 0                    # pin the IPC and engine threads (background work: other CPUs)
 //!
 //! [snapshot]
 //! max_rate_hz = 0.0            # 0: one snapshot per processed batch
@@ -86,9 +86,10 @@ pub struct IpcConfig {
     pub backpressure_ms: u64,
     /// Period of dead-node cleanup and idle work.
     pub tick_ms: u64,
-    /// Pin the daemon's IPC and engine threads to this CPU (re-solves still
-    /// use any). On a small VM a wake-up across cores costs several times
-    /// one on the same core; frontends that share the core answer fastest.
+    /// Pin the daemon's IPC and engine threads to this CPU; re-solves and
+    /// the freeing of retired factors then run on the other CPUs. On a
+    /// small VM a wake-up across cores costs several times one on the same
+    /// core; frontends that share the core answer fastest.
     pub cpu: Option<usize>,
 }
 

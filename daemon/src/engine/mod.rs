@@ -700,7 +700,11 @@ fn retire(old: State) {
     // it, is dropped here
     let _ = std::thread::Builder::new()
         .name("slamd-retire".into())
-        .spawn(move || drop(old));
+        .spawn(move || {
+            // spawned by the engine thread, it would share a pinned core
+            crate::affinity::run_in_background();
+            drop(old)
+        });
 }
 
 impl Drop for Engine {

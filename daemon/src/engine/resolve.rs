@@ -63,8 +63,8 @@ impl Job {
             .name("slamd-resolve".into())
             .spawn(move || {
                 // the caller may be pinned to one core; a re-solve belongs on
-                // whichever core is free
-                crate::affinity::unpin_current_thread();
+                // the others
+                crate::affinity::run_in_background();
                 if let Some(outcome) = run(model, &estimate, &config, polish, &ops_rx, &stopped) {
                     let _ = done_tx.send(outcome);
                 }

@@ -50,7 +50,7 @@ pub fn serve(config: &Config) -> Result<Counters, ServeError> {
 /// [`serve`], also stopping within a tick once `stop` is set.
 pub fn serve_until(config: &Config, stop: &AtomicBool) -> Result<Counters, ServeError> {
     if let Some(cpu) = config.ipc.cpu {
-        if !crate::affinity::pin_current_thread(cpu) {
+        if !crate::affinity::reserve_current_thread(cpu) {
             tracing::warn!(cpu, "Cannot pin the IPC thread; running unpinned.");
         }
     }
@@ -68,7 +68,7 @@ pub fn serve_until(config: &Config, stop: &AtomicBool) -> Result<Counters, Serve
         .name("slamd-engine".into())
         .spawn(move || {
             if let Some(cpu) = engine_config.ipc.cpu {
-                crate::affinity::pin_current_thread(cpu);
+                crate::affinity::reserve_current_thread(cpu);
             }
             // iceoryx2 ports are not Send: the outlet is opened on this thread
             match Outlet::open(&engine_config.namespace, &engine_config.qos()) {
