@@ -51,10 +51,14 @@ pub fn reserve_current_thread(cpu: usize) -> bool {
 
 /// Lets the calling thread run on every online CPU no latency-critical
 /// thread reserved ([`reserve_current_thread`]); on all of them when that
-/// leaves none.
+/// leaves none. With nothing reserved it keeps the CPUs it inherited (an
+/// embedding application's choice).
 pub fn run_in_background() {
-    let n = online_cpus();
     let reserved = RESERVED.load(Ordering::Relaxed);
+    if reserved == 0 {
+        return;
+    }
+    let n = online_cpus();
     let free: Vec<usize> = (0..n).filter(|&c| c >= 64 || reserved & (1 << c) == 0).collect();
     set_affinity(if free.is_empty() { (0..n).collect() } else { free });
 }

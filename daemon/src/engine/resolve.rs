@@ -62,8 +62,8 @@ impl Job {
         let handle = std::thread::Builder::new()
             .name("slamd-resolve".into())
             .spawn(move || {
-                // the caller may be pinned to one core; a re-solve belongs on
-                // the others
+                // the daemon's engine thread may hold a reserved core; a
+                // re-solve belongs on the others
                 crate::affinity::run_in_background();
                 if let Some(outcome) = run(model, &estimate, &config, polish, &ops_rx, &stopped) {
                     let _ = done_tx.send(outcome);
