@@ -393,9 +393,9 @@ pub struct Outcome {
     /// Georeferenced (east, north) of the final estimate, by keyframe id.
     pub enu: HashMap<KeyframeId, c64>,
     pub trace: Vec<(usize, f64)>,
-    /// When asked for, per keyframe: the engine's work on it and the
-    /// factor's entries after it (embedded only).
-    pub work: Vec<(usize, FactorWork, usize)>,
+    /// When asked for, per keyframe (by index): the engine's work on it
+    /// and the factor's entries after it (embedded only, else empty).
+    pub work: Vec<(FactorWork, usize)>,
     pub total_s: f64,
     /// Of `total_s`, the seconds from the last keyframe's snapshot to the
     /// closing estimate (the re-solve that ends the stream).
@@ -427,7 +427,7 @@ pub fn replay(
         latencies.extend(sink.keyframe(k, step)?);
         // counting the factor's entries walks its columns: only on request
         if let Some(stats) = record_work.then(|| sink.engine_stats()).flatten() {
-            work.push((k, stats.work - before, stats.factor_nnz));
+            work.push((stats.work - before, stats.factor_nnz));
             before = stats.work;
         }
         if checkpoints.contains(&k) {
@@ -525,10 +525,8 @@ pub fn run(opts: ReplayOpts) -> anyhow::Result<()> {
         crate::gps::rmse(&g.truth, |k| enu.get(&k).copied())
     });
     if let Some(path) = &opts.trace {
-        let work: HashMap<usize, (FactorWork, usize)> =
-            out.work.iter().map(|&(k, w, n)| (k, (w, n))).collect();
         let lines: Vec<String> = (out.trace.iter())
-            .map(|(k, l)| match work.get(k) {
+            .map(|(k, l)| match out.work.get(*k) {
                 Some((w, nnz)) => format!("{k} {l:.1} {} {} {nnz}", w.walked, w.solved),
                 None => format!("{k} {l:.1}"),
             })
