@@ -1,5 +1,5 @@
 //! The real `slamd` binary as a daemon, talked to through the client over
-//! shared memory (issue 4).
+//! shared memory.
 
 use slamd_client::{
     Config, EdgeInput, EdgeKind, Embedded, EngineConfig, Frontend, Information, Pose2, Publish,
@@ -373,7 +373,7 @@ fn daemon_snapshots_equal_the_embedded_engine() {
         for side in [&mut f as &mut dyn Publish, &mut embedded as &mut dyn Publish] {
             side.add_keyframe(graph.id_of(k), 0, None).unwrap();
             for &e in group {
-                side.add_edge(&EdgeInput::from_graph(&graph, e)).unwrap();
+                side.add_edge(&graph.edge_input(e)).unwrap();
             }
             side.flush().unwrap();
         }

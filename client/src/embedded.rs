@@ -2,9 +2,8 @@
 
 use crate::publish::{ClientError, Publish};
 use slamd::config::Config;
-use slamd::engine::{EdgeInput, Engine, FixInput, Snapshot, UpdateReport};
-use slamd::geometry::Pose2;
-use slamd::graph::KeyframeId;
+use slamd::engine::{Engine, Snapshot, UpdateReport};
+use slamd_types::{EdgeInput, FixInput, KeyframeId, Pose2};
 
 /// The engine behind the [`Publish`] API, in this process.
 ///

@@ -1,5 +1,10 @@
 //! What a frontend links to use slamd.
 //!
+//! With default features off, this crate links only `slamd-protocol` and
+//! `slamd-types`: a frontend that publishes to a daemon compiles no
+//! solver. The default feature `embedded` adds the in-process engine
+//! ([`Embedded`]), the daemon on a thread (`Server`) and its `Config`.
+//!
 //! - [`Frontend`] publishes keyframes, edges and GPS fixes to a running daemon over
 //!   shared memory; [`Snapshots`] reads the daemon's pose snapshots in
 //!   place (blocking [`wait`](Snapshots::wait) or non-blocking
@@ -40,15 +45,25 @@
 
 #![deny(missing_docs)]
 
+#[cfg(feature = "embedded")]
 mod embedded;
 mod publish;
 
+#[cfg(feature = "embedded")]
 pub use embedded::Embedded;
 pub use publish::{ClientError, Publish};
+#[cfg(feature = "embedded")]
 pub use slamd::config::Config;
-pub use slamd::engine::{EdgeInput, EngineConfig, FixInput, Snapshot};
-pub use slamd::geometry::Pose2;
-pub use slamd::gps::{Geodetic, GpsConfig};
-pub use slamd::graph::{EdgeKind, Information, KeyframeId};
-pub use slamd::ipc::{Frontend, Server, SnapshotSample, Snapshots, SwitchesSample, TransportError};
-pub use slamd_protocol::{Pose, Rejection, RejectionReason, SnapshotHeader, Switch, SwitchesHeader};
+#[cfg(feature = "embedded")]
+pub use slamd::engine::{EngineConfig, Snapshot};
+#[cfg(feature = "embedded")]
+pub use slamd::gps::GpsConfig;
+#[cfg(feature = "embedded")]
+pub use slamd::ipc::Server;
+pub use slamd_protocol::transport::{
+    SnapshotLink as Snapshots, SnapshotSample, SwitchesSample, TransportError,
+};
+pub use slamd_protocol::{
+    Endpoint, Frontend, Pose, Rejection, RejectionReason, SnapshotHeader, Switch, SwitchesHeader,
+};
+pub use slamd_types::{EdgeInput, EdgeKind, FixInput, Geodetic, Information, KeyframeId, Pose2};

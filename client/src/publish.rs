@@ -1,17 +1,20 @@
 //! [`Publish`]: the calls a frontend makes, whoever solves.
 
-use slamd::engine::{EdgeInput, EngineError, FixInput};
-use slamd::geometry::Pose2;
-use slamd::graph::KeyframeId;
-use slamd::ipc::{Frontend, TransportError};
+#[cfg(feature = "embedded")]
+use slamd::engine::EngineError;
+use slamd_protocol::transport::TransportError;
+use slamd_protocol::Frontend;
+use slamd_types::{EdgeInput, FixInput, KeyframeId, Pose2};
 use std::fmt;
 
 /// A failed call: the transport (daemon) or the engine (embedded) refused.
 #[derive(Debug)]
+#[non_exhaustive]
 pub enum ClientError {
     /// Publishing to the daemon failed.
     Transport(TransportError),
     /// The in-process engine refused the change.
+    #[cfg(feature = "embedded")]
     Engine(EngineError),
 }
 
@@ -19,6 +22,7 @@ impl fmt::Display for ClientError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
             ClientError::Transport(e) => e.fmt(f),
+            #[cfg(feature = "embedded")]
             ClientError::Engine(e) => e.fmt(f),
         }
     }
@@ -32,6 +36,7 @@ impl From<TransportError> for ClientError {
     }
 }
 
+#[cfg(feature = "embedded")]
 impl From<EngineError> for ClientError {
     fn from(e: EngineError) -> Self {
         ClientError::Engine(e)

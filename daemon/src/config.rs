@@ -247,7 +247,6 @@ impl Config {
             ("engine.wildfire_threshold", e.wildfire_threshold),
             ("engine.nonlinear_ratio", e.nonlinear_ratio),
             ("engine.relinearise_ratio", e.relinearise_ratio),
-            ("engine.defer_budget", e.defer_budget),
         ] {
             if !(v.is_finite() && v >= 0.0) {
                 return bad(format!("{name} {v} must be a number ≥ 0"));
@@ -276,6 +275,15 @@ impl Config {
     /// The frontend's send timeout on a full queue.
     pub fn backpressure(&self) -> Duration {
         Duration::from_millis(self.ipc.backpressure_ms)
+    }
+}
+
+impl From<&Config> for slamd_protocol::Endpoint {
+    fn from(c: &Config) -> Self {
+        slamd_protocol::Endpoint {
+            namespace: c.namespace.clone(),
+            backpressure: c.backpressure(),
+        }
     }
 }
 

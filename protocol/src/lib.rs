@@ -8,6 +8,10 @@
 //!
 //! - [`message`]: the `#[repr(C)]` types, identical in every process.
 //! - [`service`]: service names and QoS numbers, in one place.
+//! - [`codec`]: slamd's input types ([`slamd_types`]) to messages and
+//!   back, every inbound field checked into a typed [`Rejection`].
+//! - [`Frontend`]: what a frontend publishes with: numbered keyframes,
+//!   edges and fixes, then a poke.
 //! - [`transport`]: the only code in slamd that touches iceoryx2: the
 //!   daemon's [`Ingress`](transport::Ingress) and
 //!   [`Outlet`](transport::Outlet), the frontend's
@@ -20,10 +24,13 @@
 
 #![deny(missing_docs)]
 
+pub mod codec;
+mod frontend;
 pub mod message;
 pub mod service;
 pub mod transport;
 
+pub use frontend::{Endpoint, Frontend};
 pub use message::{
     Edge, EdgeKindWire, FrontendAck, GpsFix, Keyframe, Pose, Rejection, RejectionReason, SnapshotHeader,
     Switch, SwitchesHeader, MAX_FRONTENDS, PROTOCOL_VERSION,

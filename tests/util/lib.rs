@@ -2,19 +2,28 @@
 //! shared datasets live, noise-free synthetic graphs, feeding a graph to
 //! the engine as a frontend would, and a handle on the `slamd` binary.
 
-use slamd::engine::{EdgeInput, Engine, EngineConfig};
+use slamd::engine::{Engine, EngineConfig};
 use slamd::geometry::Pose2;
 use slamd::graph::{EdgeKind, Information, PoseGraph};
 use std::path::PathBuf;
 use std::process::Command;
 use std::sync::OnceLock;
 
-/// The shared datasets, `../shared/datasets` beside the repository.
+/// The environment variable naming the shared datasets folder.
+pub const DATASETS_VARIABLE: &str = "SLAMD_DATASETS";
+
+/// The shared datasets: the folder named by `SLAMD_DATASETS`, by default
+/// `../shared/datasets` beside the repository. A missing folder fails the
+/// caller with a message naming the variable; no test skips for it.
 pub fn datasets() -> PathBuf {
-    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/datasets");
+    let dir = match std::env::var_os(DATASETS_VARIABLE) {
+        Some(dir) => PathBuf::from(dir),
+        None => PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/datasets"),
+    };
     assert!(
         dir.join("README.md").exists(),
-        "the shared datasets must sit beside the repository at {}",
+        "no shared datasets at {}: set {DATASETS_VARIABLE} to the folder that holds them \
+         (default ../shared/datasets beside the repository)",
         dir.display()
     );
     dir
@@ -131,7 +140,7 @@ pub fn replay(
         engine.add_keyframe(g.id_of(k), None).expect("a new keyframe");
         for &e in group {
             engine
-                .add_edge(EdgeInput::from_graph(g, e))
+                .add_edge(g.edge_input(e))
                 .expect("an edge between known keyframes");
             sent.push(e);
         }

@@ -6,64 +6,7 @@
 //! in the tangent plane: a fix whose ENU coordinates were computed this way
 //! comes back to within numerical round-off, at any distance.
 
-use super::GpsError;
-
-/// A WGS84 position: degrees, degrees, metres above the ellipsoid. In
-/// configuration files it is the string `"LAT,LON"` or `"LAT,LON,HEIGHT"`.
-#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-#[serde(try_from = "String", into = "String")]
-pub struct Geodetic {
-    /// Latitude (degrees, north positive).
-    pub lat: f64,
-    /// Longitude (degrees, east positive).
-    pub lon: f64,
-    /// Height above the ellipsoid (m).
-    pub height: f64,
-}
-
-impl Geodetic {
-    /// A checked position: finite, |lat| ≤ 90, |lon| ≤ 180.
-    pub fn new(lat: f64, lon: f64, height: f64) -> Result<Self, GpsError> {
-        if !(lat.is_finite() && lon.is_finite() && height.is_finite()) {
-            return Err(GpsError::NonFinite);
-        }
-        if lat.abs() > 90.0 || lon.abs() > 180.0 {
-            return Err(GpsError::OutOfRange);
-        }
-        Ok(Self { lat, lon, height })
-    }
-
-    /// Parses `LAT,LON` or `LAT,LON,HEIGHT` (degrees, metres).
-    pub fn parse(s: &str) -> Result<Self, String> {
-        let v: Vec<f64> = s
-            .split(',')
-            .map(|t| {
-                t.trim()
-                    .parse::<f64>()
-                    .map_err(|_| format!("`{t}` is not a number"))
-            })
-            .collect::<Result<_, _>>()?;
-        let (lat, lon, h) = match v[..] {
-            [lat, lon] => (lat, lon, 0.0),
-            [lat, lon, h] => (lat, lon, h),
-            _ => return Err(format!("`{s}`: expected LAT,LON or LAT,LON,HEIGHT")),
-        };
-        Self::new(lat, lon, h).map_err(|e| format!("`{s}`: {e}"))
-    }
-}
-
-impl TryFrom<String> for Geodetic {
-    type Error = String;
-    fn try_from(s: String) -> Result<Self, String> {
-        Self::parse(&s)
-    }
-}
-
-impl From<Geodetic> for String {
-    fn from(g: Geodetic) -> String {
-        format!("{},{},{}", g.lat, g.lon, g.height)
-    }
-}
+pub use slamd_types::Geodetic;
 
 /// The tangent plane at `origin`.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -131,14 +74,5 @@ mod tests {
                 "{e},{n} → {e2},{n2}"
             );
         }
-    }
-
-    #[test]
-    fn bad_positions_are_refused() {
-        assert_eq!(Geodetic::new(91.0, 0.0, 0.0), Err(GpsError::OutOfRange));
-        assert_eq!(Geodetic::new(0.0, -180.5, 0.0), Err(GpsError::OutOfRange));
-        assert_eq!(Geodetic::new(f64::NAN, 0.0, 0.0), Err(GpsError::NonFinite));
-        assert_eq!(Geodetic::parse("45.5,9.2").unwrap().lat, 45.5);
-        assert!(Geodetic::parse("45.5").is_err());
     }
 }

@@ -16,6 +16,7 @@ pub mod triangles;
 
 pub use georef::Georef;
 pub use local_frame::{Geodetic, LocalFrame};
+pub use slamd_types::{check_covariance, GpsError};
 pub use triangles::{Triangle, TriangleParams};
 
 use crate::geometry::Pose2;
@@ -183,39 +184,10 @@ impl GpsFix {
     }
 }
 
-/// Why a fix was refused.
-#[derive(Clone, Debug, PartialEq)]
-#[non_exhaustive]
-pub enum GpsError {
-    /// A NaN or infinite number.
-    NonFinite,
-    /// |lat| > 90° or |lon| > 180°.
-    OutOfRange,
-    /// The covariance is not symmetric positive definite.
-    NotPositiveDefinite,
-}
-
-impl std::fmt::Display for GpsError {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(match self {
-            GpsError::NonFinite => "GPS fix has a non-finite number",
-            GpsError::OutOfRange => "GPS fix is out of range (|lat| > 90 or |lon| > 180)",
-            GpsError::NotPositiveDefinite => "GPS covariance is not positive definite",
-        })
-    }
-}
-
-impl std::error::Error for GpsError {}
-
-/// Checks a 2×2 covariance (row-major): finite, symmetric, positive definite.
+/// Checks a 2×2 covariance (row-major): finite, symmetric, positive
+/// definite ([`check_covariance`]).
 pub fn covariance(c: [f64; 4]) -> Result<Matrix2<f64>, GpsError> {
-    if c.iter().any(|v| !v.is_finite()) {
-        return Err(GpsError::NonFinite);
-    }
-    let sym = (c[1] - c[2]).abs() <= 1e-12 * c[0].abs().max(c[3].abs()).max(1e-300);
-    if !(sym && c[0] > 0.0 && c[0] * c[3] - c[1] * c[2] > 0.0) {
-        return Err(GpsError::NotPositiveDefinite);
-    }
+    check_covariance(c)?;
     Ok(Matrix2::new(c[0], c[1], c[2], c[3]))
 }
 

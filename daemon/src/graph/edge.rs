@@ -1,32 +1,7 @@
 //! [`Edge`]: one relative-pose measurement between two keyframes.
 
-use super::Information;
+use super::{EdgeKind, Information};
 use crate::geometry::Pose2;
-
-/// What produced an edge. The outlier filter never switches odometry.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum EdgeKind {
-    /// Consecutive keyframes, from the frontend's odometry.
-    #[default]
-    Odometry,
-    /// A place-recognition match between distant keyframes.
-    LoopClosure,
-    /// Anything else (a prior, a manual constraint).
-    Other,
-}
-
-impl EdgeKind {
-    /// The usual reading of a dataset file: keyframes with consecutive ids are
-    /// odometry, every other pair a loop closure.
-    pub fn from_ids(i: u64, j: u64) -> Self {
-        if i.abs_diff(j) == 1 {
-            EdgeKind::Odometry
-        } else {
-            EdgeKind::LoopClosure
-        }
-    }
-}
 
 /// A measurement `T_ij` of keyframe `j` seen from keyframe `i`, with its
 /// information matrix Ω_ij. `from` and `to` are indices into a

@@ -6,18 +6,15 @@
 
 mod cost;
 mod edge;
-mod information;
 
 pub use cost::{chi2, chi2_of_edges, edge_chi2, edge_error, edge_error_turned};
-pub use edge::{Edge, EdgeKind};
-pub use information::{Information, InformationError};
+pub use edge::Edge;
+use slamd_types::EdgeInput;
+pub use slamd_types::{EdgeKind, Information, InformationError, KeyframeId};
 
 use crate::geometry::Pose2;
 use std::collections::{HashMap, VecDeque};
 use std::fmt;
-
-/// The frontend's name for a keyframe.
-pub type KeyframeId = u64;
 
 /// Why a keyframe or an edge cannot join a graph.
 #[derive(Clone, Debug, PartialEq)]
@@ -87,6 +84,18 @@ pub struct PoseGraph {
 }
 
 impl PoseGraph {
+    /// Edge `e` as a frontend sends it (keyframe ids, not indices).
+    pub fn edge_input(&self, e: usize) -> EdgeInput {
+        let edge = self.edges[e];
+        EdgeInput::new(
+            self.id_of(edge.from),
+            self.id_of(edge.to),
+            edge.measurement,
+            edge.information,
+            edge.kind,
+        )
+    }
+
     /// Builds a graph whose keyframes are `keyframes` sorted by id.
     pub fn with_keyframes(mut keyframes: Vec<Keyframe>) -> Result<Self, GraphError> {
         keyframes.sort_by_key(|k| k.id);

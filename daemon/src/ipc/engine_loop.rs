@@ -7,13 +7,13 @@ use crate::engine::{EdgeInput, Engine, EngineError, FixInput};
 use crate::geometry::Pose2;
 use crate::graph::{EdgeKind, GraphError, KeyframeId};
 use crate::outliers::REJECTED_BELOW;
-use crate::wire::{engine_rejection, Origin};
+use crate::wire::{self, engine_rejection};
 use crossbeam::channel::{Receiver, RecvTimeoutError};
+use slamd_protocol::codec::Origin;
 use slamd_protocol::message::kind;
 use slamd_protocol::transport::{Outlet, TransportError};
 use slamd_protocol::{
-    FrontendAck, Pose, Rejection, RejectionReason, SnapshotHeader, Switch, SwitchesHeader, MAX_FRONTENDS,
-    PROTOCOL_VERSION,
+    FrontendAck, Rejection, RejectionReason, SnapshotHeader, SwitchesHeader, MAX_FRONTENDS, PROTOCOL_VERSION,
 };
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
@@ -345,18 +345,9 @@ impl EngineLoop {
             },
         };
         let georef = snap.georef;
-        let poses = snap.poses().map(|(id, p)| {
-            let enu = georef.map_or(Pose2::new(0.0, 0.0, 0.0), |g| g.to_enu(&p));
-            Pose {
-                id,
-                x: p.x,
-                y: p.y,
-                theta: p.theta,
-                east: enu.x,
-                north: enu.y,
-                heading: enu.theta,
-            }
-        });
+        let poses = snap
+            .poses()
+            .map(|(id, p)| wire::pose_out(id, &p, georef.as_ref()));
         let result: Result<(), TransportError> = self.outlet.publish(header, snap.len(), poses);
         if let Err(e) = result {
             tracing::error!(error = %e, "Cannot publish a snapshot.");
@@ -399,14 +390,7 @@ impl EngineLoop {
                 frontend: 0,
                 sequence: 0,
             });
-            Switch {
-                from: graph.id_of(edge.from),
-                to: graph.id_of(edge.to),
-                frontend: o.frontend,
-                reserved: 0,
-                sequence: o.sequence,
-                weight: switches[e],
-            }
+            wire::switch_out(graph.id_of(edge.from), graph.id_of(edge.to), o, switches[e])
         });
         if let Err(e) = self.outlet.publish_switches(header, loops.len(), items) {
             tracing::error!(error = %e, "Cannot publish the switches.");

@@ -6,7 +6,7 @@
 //! keyframe arrives, the wait exceeds a timeout, or the buffer is full.
 
 use crate::graph::KeyframeId;
-use crate::wire::Origin;
+use slamd_protocol::codec::Origin;
 use std::collections::HashMap;
 use std::time::{Duration, Instant};
 

@@ -4,20 +4,19 @@
 //!   transport's WaitSet and forwards checked messages over a crossbeam
 //!   channel; its engine thread applies each batch, publishes one snapshot
 //!   per batch and a rejection per refused message.
-//! - [`Frontend`]: what a frontend publishes with: numbered keyframes and
-//!   edges, then a poke.
+//! - [`Frontend`] (from [`slamd_protocol`]): what a frontend publishes
+//!   with: numbered keyframes and edges, then a poke.
 //!
 //! No iceoryx2 type appears here; the ports live in
 //! [`slamd_protocol::transport`].
 
 pub(crate) mod engine_loop;
-mod frontend;
 mod held;
 mod server;
 
 pub use engine_loop::Counters;
-pub use frontend::Frontend;
 pub use server::{serve, serve_until, ServeError, Server};
 pub use slamd_protocol::transport::{
     SnapshotLink as Snapshots, SnapshotSample, SwitchesSample, TransportError,
 };
+pub use slamd_protocol::{Endpoint, Frontend};

@@ -2,8 +2,8 @@
 
 use super::engine_loop::{Counters, EngineLoop, Msg};
 use crate::config::Config;
-use crate::wire;
 use crossbeam::channel;
+use slamd_protocol::codec as wire;
 use slamd_protocol::transport::{Exit, Ingress, Input, Outlet, TransportError, Wake};
 use std::fmt;
 use std::sync::atomic::{AtomicBool, Ordering};

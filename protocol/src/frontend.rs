@@ -1,13 +1,20 @@
 //! [`Frontend`]: publishing keyframes, edges and GPS fixes to a running daemon.
 
-use crate::config::Config;
-use crate::engine::{EdgeInput, FixInput};
-use crate::geometry::Pose2;
-use crate::graph::KeyframeId;
-use crate::wire::{edge_out, gps_out, keyframe_out, Origin};
-use slamd_protocol::transport::{FrontendLink, TransportError};
+use crate::codec::{edge_out, gps_out, keyframe_out, Origin};
+use crate::transport::{FrontendLink, TransportError};
+use slamd_types::{EdgeInput, FixInput, KeyframeId, Pose2};
 use std::sync::atomic::{AtomicU32, Ordering};
 use std::time::Duration;
+
+/// Where a frontend connects: the daemon's namespace, and how long a send
+/// that finds the daemon's queue full retries before it fails.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Endpoint {
+    /// The daemon's namespace (`slamd run --namespace`).
+    pub namespace: String,
+    /// The send timeout on a full queue.
+    pub backpressure: Duration,
+}
 
 static NEXT: AtomicU32 = AtomicU32::new(1);
 
@@ -20,9 +27,11 @@ pub struct Frontend {
 }
 
 impl Frontend {
-    /// Connects to the daemon named by `config` (namespace, backpressure).
-    pub fn connect(config: &Config) -> Result<Self, TransportError> {
-        Self::connect_to(&config.namespace, config.backpressure())
+    /// Connects to the daemon at `endpoint` (for example a daemon's
+    /// configuration: its namespace and backpressure).
+    pub fn connect(endpoint: impl Into<Endpoint>) -> Result<Self, TransportError> {
+        let e = endpoint.into();
+        Self::connect_to(&e.namespace, e.backpressure)
     }
 
     /// Connects to the daemon serving `namespace`.
@@ -83,7 +92,7 @@ impl Frontend {
     }
 
     /// Publishes a raw edge message as is (tests of hostile input).
-    pub fn send_raw_edge(&mut self, mut m: slamd_protocol::Edge) -> Result<u64, TransportError> {
+    pub fn send_raw_edge(&mut self, mut m: crate::Edge) -> Result<u64, TransportError> {
         let o = self.next();
         m.frontend = o.frontend;
         m.sequence = o.sequence;

@@ -1,0 +1,76 @@
+//! What a frontend hands slamd: keyframe ids, edges and GPS fixes.
+
+use crate::{Geodetic, Information, Pose2};
+
+/// A keyframe's id, chosen by the frontend (unique per map).
+pub type KeyframeId = u64;
+
+/// What produced an edge. The outlier filter never switches odometry.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum EdgeKind {
+    /// Consecutive keyframes, from the frontend's odometry.
+    #[default]
+    Odometry,
+    /// A place-recognition match between distant keyframes.
+    LoopClosure,
+    /// Anything else (a prior, a manual constraint).
+    Other,
+}
+
+impl EdgeKind {
+    /// The usual reading of a dataset file: keyframes with consecutive ids are
+    /// odometry, every other pair a loop closure.
+    pub fn from_ids(i: u64, j: u64) -> Self {
+        if i.abs_diff(j) == 1 {
+            EdgeKind::Odometry
+        } else {
+            EdgeKind::LoopClosure
+        }
+    }
+}
+
+/// An edge as a frontend gives it: keyframe ids, `T_ij`, Ω and its kind.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct EdgeInput {
+    /// Keyframe `i`.
+    pub from: KeyframeId,
+    /// Keyframe `j`.
+    pub to: KeyframeId,
+    /// `T_ij`: `j` seen from `i`.
+    pub measurement: Pose2,
+    /// Ω over `(x, y, θ)`.
+    pub information: Information,
+    /// What produced it.
+    pub kind: EdgeKind,
+}
+
+impl EdgeInput {
+    /// Bundles the fields.
+    pub fn new(
+        from: KeyframeId,
+        to: KeyframeId,
+        measurement: Pose2,
+        information: Information,
+        kind: EdgeKind,
+    ) -> Self {
+        Self {
+            from,
+            to,
+            measurement,
+            information,
+            kind,
+        }
+    }
+}
+
+/// A GPS fix as a frontend gives it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FixInput {
+    /// The keyframe it was taken at.
+    pub keyframe: KeyframeId,
+    /// Where (WGS84).
+    pub position: Geodetic,
+    /// Covariance of (east, north) in m², row-major.
+    pub covariance: [f64; 4],
+}

@@ -1,0 +1,27 @@
+//! The types a frontend and slamd share: planar poses, information
+//! matrices, edge kinds, keyframe ids and GPS positions.
+//!
+//! This crate is small on purpose: a frontend that only publishes to a
+//! daemon links it and `slamd-protocol`, not the solver.
+//!
+//! ```
+//! use slamd_types::{EdgeInput, EdgeKind, Information, Pose2};
+//!
+//! let step = Pose2::new(1.0, 0.0, std::f64::consts::FRAC_PI_2);
+//! let edge = EdgeInput::new(0, 1, step, Information::identity(), EdgeKind::Odometry);
+//! let back = step.compose(&step.inverse());
+//! assert!(back.x.abs() < 1e-12 && back.theta.abs() < 1e-12);
+//! assert_eq!(edge.kind, EdgeKind::from_ids(0, 1));
+//! ```
+
+#![deny(missing_docs)]
+
+mod gps;
+mod information;
+mod input;
+mod pose;
+
+pub use gps::{check_covariance, Geodetic, GpsError};
+pub use information::{Information, InformationError};
+pub use input::{EdgeInput, EdgeKind, FixInput, KeyframeId};
+pub use pose::{wrap_angle, Pose2};
