@@ -1,9 +1,10 @@
 //! [`LinearStages`]: the two-stage linear solution, kept exact as the graph
 //! grows.
 //!
-//! Both stages have fixed normal matrices (ALGORITHM.md §2), so a new edge is
-//! a rank-1 update of each factor, a reweight a rank-1 update or downdate,
-//! and a new keyframe an appended column:
+//! Both stages have fixed normal matrices (docs/design.md, "Two stages:
+//! axes, then positions"), so a new edge is a rank-1 update of each
+//! factor, a reweight a rank-1 update or downdate, and a new keyframe an
+//! appended column:
 //! - axes: `r_j − e^{iθ_ij} r_i = 0`, weight `s/σθ²`, `r_gauge = 1`;
 //! - positions: `p_j − p_i = r_i t_ij`, weight `s·2/tr Σ_t` (the scalar,
 //!   data-independent Laplacian), `p_gauge = 0`.

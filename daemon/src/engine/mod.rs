@@ -43,193 +43,49 @@
 //! assert!((p2.x - 1.0).abs() < 1e-9 && (p2.y - 1.0).abs() < 1e-9);
 //! ```
 
+mod arrival;
+mod background;
+mod chi2;
 mod config;
-mod deferred;
+mod error;
 pub mod gauss_newton;
 pub mod linear_stages;
 mod model;
 mod op;
+mod rebuild;
+mod report;
 mod resolve;
+mod schedule;
 mod snapshot;
+mod solvers;
 mod state;
 
 pub use config::EngineConfig;
+pub use error::EngineError;
+pub use op::{Op, SnapshotSource};
+pub use report::{EngineStats, FactorWork, UpdateReport};
+pub use slamd_types::{EdgeInput, FixInput};
 pub use snapshot::Snapshot;
-pub use state::{FactorWork, Op, SnapshotSource};
 
 use crate::geometry::Pose2;
-use crate::gps::{covariance, Geodetic, GpsError, GpsFix, LocalFrame};
-use crate::graph::{EdgeKind, GraphError, Information, KeyframeId};
-use crate::sparse::dynamic::UpdateError;
+use crate::gps::{covariance, Geodetic, GpsFix, LocalFrame};
+use crate::graph::KeyframeId;
+use background::Background;
 use faer::c64;
-use resolve::Job;
-use state::{Polish, State};
-use std::fmt;
-use std::time::Instant;
-
-/// An edge as a frontend gives it: keyframe ids, `T_ij`, Ω and its kind.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct EdgeInput {
-    /// Keyframe `i`.
-    pub from: KeyframeId,
-    /// Keyframe `j`.
-    pub to: KeyframeId,
-    /// `T_ij`: `j` seen from `i`.
-    pub measurement: Pose2,
-    /// Ω over `(x, y, θ)`.
-    pub information: Information,
-    /// What produced it.
-    pub kind: EdgeKind,
-}
-
-impl EdgeInput {
-    /// Bundles the fields.
-    pub fn new(
-        from: KeyframeId,
-        to: KeyframeId,
-        measurement: Pose2,
-        information: Information,
-        kind: EdgeKind,
-    ) -> Self {
-        Self {
-            from,
-            to,
-            measurement,
-            information,
-            kind,
-        }
-    }
-
-    /// Edge `e` of `graph` as a frontend sends it (keyframe ids, not
-    /// indices).
-    pub fn from_graph(graph: &crate::graph::PoseGraph, e: usize) -> Self {
-        let edge = graph.edges()[e];
-        Self::new(
-            graph.id_of(edge.from),
-            graph.id_of(edge.to),
-            edge.measurement,
-            edge.information,
-            edge.kind,
-        )
-    }
-}
-
-/// Why the engine refused a change. A refused change is not stored.
-#[derive(Clone, Debug, PartialEq)]
-#[non_exhaustive]
-pub enum EngineError {
-    /// The graph refused it (duplicate or unknown id, self-edge, NaN).
-    Graph(GraphError),
-    /// No edge has this index.
-    UnknownEdge(usize),
-    /// A weight that is negative or not finite.
-    InvalidWeight(f64),
-    /// Odometry edges are never switched off.
-    OdometrySwitch(usize),
-    /// A downdate lost positive definiteness; the engine refactorised.
-    Numeric(UpdateError),
-    /// A GPS fix out of range, non-finite, or with a bad covariance.
-    Gps(GpsError),
-    /// A GPS fix for a keyframe that has not arrived.
-    FixKeyframe(KeyframeId),
-}
-
-impl fmt::Display for EngineError {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match self {
-            EngineError::Graph(e) => e.fmt(f),
-            EngineError::UnknownEdge(e) => write!(f, "no edge with index {e}"),
-            EngineError::InvalidWeight(w) => write!(f, "edge weight {w} is not a finite number ≥ 0"),
-            EngineError::OdometrySwitch(e) => write!(f, "edge {e} is odometry and cannot be switched off"),
-            EngineError::Numeric(e) => write!(f, "{e}; refactorised"),
-            EngineError::Gps(e) => e.fmt(f),
-            EngineError::FixKeyframe(id) => write!(f, "GPS fix for unknown keyframe {id}"),
-        }
-    }
-}
-
-impl std::error::Error for EngineError {}
-
-impl From<GraphError> for EngineError {
-    fn from(e: GraphError) -> Self {
-        EngineError::Graph(e)
-    }
-}
-
-/// A GPS fix as a frontend gives it.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct FixInput {
-    /// The keyframe it was taken at.
-    pub keyframe: KeyframeId,
-    /// Where (WGS84).
-    pub position: Geodetic,
-    /// Covariance of (east, north) in m², row-major.
-    pub covariance: [f64; 4],
-}
-
-/// What an [`Engine::update`] did.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct UpdateReport {
-    /// The snapshot version it produced.
-    pub version: u64,
-    /// Keyframes whose estimate moved.
-    pub moved: usize,
-    /// χ² of the new estimate.
-    pub chi2: f64,
-    /// True when a finished re-solve was swapped in.
-    pub resolved: bool,
-}
-
-/// Counters of the engine's work.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct EngineStats {
-    /// Re-solves swapped in.
-    pub resolves: usize,
-    /// Refreshes swapped in.
-    pub refreshes: usize,
-    /// Seconds spent in re-solves (on their thread).
-    pub resolve_seconds: f64,
-    /// Refactorisations forced by a failed downdate.
-    pub recoveries: usize,
-    /// Inline relinearisations (`relinearise_ratio`).
-    pub relinearisations: usize,
-    /// Inline re-solves forced by the nonlinearity check.
-    pub nonlinear_resolves: usize,
-    /// Inline re-solves forced by a run of agreeing loop closures switched
-    /// off on arrival ([`DriftRun`](crate::outliers::DriftRun)).
-    pub drift_resolves: usize,
-    /// Entries of the Gauss–Newton factor now.
-    pub factor_nnz: usize,
-    /// Loop closures waiting out of the factor now.
-    pub deferred: usize,
-    /// Their χ² at the estimate (at most `defer_budget` times the
-    /// estimate's).
-    pub deferred_chi2: f64,
-    /// What the updates and solves on this thread have swept of the
-    /// Gauss–Newton factors so far (a re-solve's catch-up on its own
-    /// thread not counted).
-    pub work: FactorWork,
-}
+use op::Polish;
+use schedule::Schedule;
+use state::State;
 
 /// The incremental pose-graph solver.
 pub struct Engine {
     state: State,
     config: EngineConfig,
-    job: Option<Job>,
-    log: Vec<(u64, Op)>,
-    seq: u64,
-    edges_since_resolve: usize,
-    edges_since_refresh: usize,
-    /// Keyframes below this index are known to the running re-solve's
-    /// hints (handed over, or forwarded after an update).
-    hinted: usize,
-    nnz_after_resolve: usize,
+    background: Background,
+    schedule: Schedule,
     version: u64,
     stats: EngineStats,
     /// The ENU frame: the configured origin, else the first fix's.
     frame: Option<LocalFrame>,
-    /// Fixes in the estimate at the last re-solve.
-    fixes_at_resolve: usize,
     /// This thread's work on the states it replaced, and the current
     /// state's work when it took over.
     work_done: FactorWork,
@@ -241,17 +97,11 @@ impl Engine {
     pub fn new(config: EngineConfig) -> Self {
         Self {
             state: State::new(&config),
-            job: None,
-            log: Vec::new(),
-            seq: 0,
-            edges_since_resolve: 0,
-            edges_since_refresh: 0,
-            hinted: 0,
-            nnz_after_resolve: 0,
+            background: Background::default(),
+            schedule: Schedule::default(),
             version: 0,
             stats: EngineStats::default(),
             frame: config.gps.origin.map(LocalFrame::new),
-            fixes_at_resolve: 0,
             work_done: FactorWork::default(),
             work_base: FactorWork::default(),
             config,
@@ -301,8 +151,7 @@ impl Engine {
     /// joins the estimate when it links to the gauge's part of the graph.
     pub fn add_edge(&mut self, edge: EdgeInput) -> Result<usize, EngineError> {
         self.submit(Op::Edge(edge))?;
-        self.edges_since_resolve += 1;
-        self.edges_since_refresh += 1;
+        self.schedule.edge_added();
         Ok(self.state.model.graph.edges().len() - 1)
     }
 
@@ -329,25 +178,20 @@ impl Engine {
             }
             Err(e) => return Err(e),
         }
-        if let Some(job) = &self.job {
-            job.forward(self.seq, op.clone());
-            self.log.push((self.seq, op));
-        }
-        self.seq += 1;
+        self.background.record(op);
         Ok(())
     }
 
     /// Solves for the new estimate, swaps in a finished re-solve, and
     /// starts one when due. Returns what changed.
     pub fn update(&mut self) -> UpdateReport {
-        let mut resolved = self.poll_job();
+        let mut resolved = self.poll_background();
         let mut moved = self.solve();
         if self.state.take_drifted() {
             // the loop closures it turned away are true: a re-solve with
-            // the start that does not exclude them takes them back. Inline:
-            // started in the background, it was abandoned by the next
-            // nonlinearity check, or waited for there up to 104 s (W10000),
-            // and City10000's run went on
+            // the start that does not exclude them takes them back, inline
+            // (in the background, the next nonlinearity check would
+            // abandon it)
             self.stats.drift_resolves += 1;
             tracing::debug!(
                 keyframes = self.keyframe_count(),
@@ -366,12 +210,14 @@ impl Engine {
             moved = self.resolve_inline(Polish::Inline);
             resolved = true;
         }
-        self.forward_estimates();
+        self.background.forward_estimates(&self.state);
         self.version += 1;
-        if self.resolve_due() {
-            self.start_job(Polish::Full);
-        } else if self.refresh_due() {
-            self.start_job(Polish::None);
+        if !self.background.running() {
+            if self.schedule.resolve_due(&self.config, &self.state) {
+                self.start_job(Polish::Full);
+            } else if self.schedule.refresh_due(&self.config) {
+                self.start_job(Polish::None);
+            }
         }
         UpdateReport {
             version: self.version,
@@ -383,14 +229,14 @@ impl Engine {
 
     /// Starts a re-solve now if none is running (call when idle).
     pub fn idle(&mut self) {
-        if self.job.is_none() && self.edges_since_resolve > 0 {
+        if !self.background.running() && self.schedule.edges_since_resolve() {
             self.start_job(Polish::Full);
         }
     }
 
     /// True while a re-solve runs on its thread.
     pub fn resolving(&self) -> bool {
-        self.job.is_some()
+        self.background.running()
     }
 
     /// Re-solves inline over everything (abandoning a running re-solve):
@@ -447,36 +293,23 @@ impl Engine {
 
     /// Work counters.
     pub fn stats(&self) -> EngineStats {
-        let (deferred, deferred_chi2) = self.state.deferred();
         let mut work = self.work_done;
         work += self.state.work() - self.work_base;
         EngineStats {
             factor_nnz: self.state.factor_nnz(),
-            deferred,
-            deferred_chi2,
             work,
             ..self.stats
         }
     }
 
     /// A full re-solve here. A running background re-solve is abandoned:
-    /// this one covers everything it does, and more. Swapping the older
-    /// one in afterwards would leave the newest edges unpolished with no
-    /// re-solve due (the demo ended at χ² 6,900-8,700 instead of 2,374);
-    /// waiting for it cost a keyframe 15-22 s on City10000 with 1000
-    /// outliers, and the closing re-solve, when it waited, 0.4 s of
-    /// City10000's 0.76. A cheaper relinearisation for the
-    /// nonlinearity check, a few robust iterations with the switches held,
-    /// left 8-20 true loop closures of the test world off in 3-15% of runs.
+    /// this one covers everything it does, and more; swapped in
+    /// afterwards, the older one would leave the newest edges unpolished
+    /// with no re-solve due.
     fn resolve_inline(&mut self, polish: Polish) -> usize {
-        if let Some(job) = self.job.take() {
-            job.abandon();
-            self.log.clear();
-        }
+        self.background.abandon();
         // what the swapped-in state replayed is pending, and a rebuild
-        // polishes only connected edges: connect them first (else the
-        // keyframes that arrived during the last background re-solve, 200
-        // of Manhattan's, missed the polish that ends a stream)
+        // polishes only connected edges: connect them first
         self.solve();
         self.rebuild_inline(polish);
         self.stats.resolves += 1;
@@ -500,7 +333,7 @@ impl Engine {
     /// model's plus `slack` (never for a ratio of 0).
     fn beyond(&self, ratio: f64, slack: f64) -> bool {
         match self.state.predicted_chi2() {
-            Some(predicted) => ratio > 0.0 && self.state.factor_chi2() > ratio * predicted.max(0.0) + slack,
+            Some(predicted) => ratio > 0.0 && self.state.chi2() > ratio * predicted.max(0.0) + slack,
             None => false,
         }
     }
@@ -525,118 +358,49 @@ impl Engine {
         self.beyond(self.config.relinearise_ratio, RELINEARISE_SLACK)
     }
 
-    fn resolve_due(&self) -> bool {
-        if self.job.is_some() {
-            return false;
-        }
-        let c = &self.config;
-        let by_count = c.resolve_every_edges > 0 && self.edges_since_resolve >= c.resolve_every_edges;
-        let by_fill = c.resolve_fill_ratio > 0.0
-            && self.nnz_after_resolve > 0
-            && self.state.factor_nnz() as f64 > c.resolve_fill_ratio * self.nnz_after_resolve as f64;
-        // georeference as soon as two fixes are in, and again whenever
-        // their number has doubled; the count of fixes on joined keyframes
-        // is a scan, so it waits until all fixes together could pass
-        let due = |fixes: usize| fixes >= 2 && fixes >= 2 * self.fixes_at_resolve.max(1);
-        let by_gps = due(self.state.model.fixes.len()) && due(self.state.usable_fixes());
-        by_count || by_fill || by_gps
-    }
-
-    /// Whether a refresh is due: the background thread is free and enough
-    /// edges arrived since the last one.
-    fn refresh_due(&self) -> bool {
-        let every = self.config.refresh_every_edges;
-        self.config.background && self.job.is_none() && every > 0 && self.edges_since_refresh >= every
-    }
-
-    /// Forwards the estimates of the keyframes added since the last call
-    /// (those that joined) to the running re-solve, as catch-up hints.
-    fn forward_estimates(&mut self) {
-        let Some(job) = &self.job else {
-            return;
-        };
-        let (model, estimate) = (&self.state.model, self.state.estimate());
-        let n = model.graph.len();
-        for k in (self.hinted..n).filter(|&k| model.joined[k]) {
-            job.hint(k, estimate[k]);
-        }
-        self.hinted = n;
-    }
-
-    /// Starts a re-solve ([`Polish::Full`]) or a refresh ([`Polish::None`]).
+    /// Starts a re-solve ([`Polish::Full`]) or a refresh ([`Polish::None`]),
+    /// on the background thread when configured, else here.
     fn start_job(&mut self, polish: Polish) {
-        self.edges_since_refresh = 0;
-        if polish != Polish::None {
-            self.edges_since_resolve = 0;
-            self.fixes_at_resolve = self.state.usable_fixes();
-        }
-        let model = self.state.model().clone();
-        let estimate = self.state.estimate().to_vec();
+        self.schedule.started(polish, &self.state);
         if self.config.background {
-            self.log.clear();
-            self.hinted = self.state.model.graph.len();
-            self.job = Some(Job::spawn(model, estimate, self.config.clone(), polish));
-        } else {
-            let (_tx, rx) = crossbeam::channel::unbounded();
-            let never = std::sync::atomic::AtomicBool::new(false);
-            if let Some(outcome) = resolve::run(model, &estimate, &self.config, polish, &rx, &never) {
-                self.swap_in(outcome);
-            }
+            self.background.start(&self.state, &self.config, polish);
+        } else if let Some(outcome) = background::run_inline(&self.state, &self.config, polish) {
+            self.swap_in(outcome, Vec::new());
         }
     }
 
-    fn poll_job(&mut self) -> bool {
-        let Some(job) = &mut self.job else {
-            return false;
-        };
-        match job.try_finish() {
-            Some(outcome) => {
-                self.job = None;
-                self.swap_in(outcome)
-            }
+    /// Swaps in the background job's state if it finished.
+    fn poll_background(&mut self) -> bool {
+        match self.background.poll() {
+            Some((outcome, log)) => self.swap_in(outcome, log),
             None => false,
         }
     }
 
-    /// Replays what the re-solve missed and makes its state current.
-    fn swap_in(&mut self, outcome: resolve::Outcome) -> bool {
-        let log = std::mem::take(&mut self.log);
-        let Ok(mut state) = outcome.state else {
-            tracing::warn!("Re-solve failed; keeping the current factor.");
+    /// Catches the job's state up with the ops in `log` and makes it
+    /// current.
+    fn swap_in(&mut self, outcome: resolve::Outcome, log: Vec<(u64, Op)>) -> bool {
+        let resolve::Outcome {
+            state,
+            last_seq,
+            seconds,
+            polish,
+        } = outcome;
+        let Some((state, base)) = background::catch_up(state, last_seq, log, &self.state, &self.config)
+        else {
             return false;
         };
-        // the ops it missed join where this state's solves put them
-        let base = state.work();
-        state.set_hints(self.state.estimate(), &self.state.model.joined);
-        let (caught_up, mut replayed) = (Instant::now(), 0);
-        for (seq, op) in log {
-            if outcome.last_seq.is_none_or(|last| seq > last) {
-                replayed += 1;
-                if let Err(e) = state.replay(&op, self.config.wildfire_threshold) {
-                    tracing::warn!(error = %e, seq, ?op, "Re-solve cannot replay an op; discarded.");
-                    return false;
-                }
-            }
-        }
-        if let Err(e) = state.join_pending() {
-            tracing::warn!(error = %e, "Re-solve cannot connect the replayed edges; discarded.");
-            return false;
-        }
-        let catch_up_seconds = caught_up.elapsed().as_secs_f64();
-        state.clear_hints();
         self.replace_state(state, base);
-        self.after_resolve();
-        if outcome.polish == Polish::None {
+        self.schedule.fresh(&self.state);
+        if polish == Polish::None {
             self.stats.refreshes += 1;
         } else {
             self.stats.resolves += 1;
-            self.stats.resolve_seconds += outcome.seconds;
+            self.stats.resolve_seconds += seconds;
         }
         tracing::debug!(
             keyframes = self.keyframe_count(),
-            seconds = outcome.seconds,
-            replayed,
-            catch_up_seconds,
+            seconds,
             chi2 = self.state.chi2(),
             "Re-solve swapped in."
         );
@@ -648,14 +412,13 @@ impl Engine {
     /// relinearisation or a recovery ([`Polish::None`]) leaves them.
     fn rebuild_inline(&mut self, polish: Polish) {
         let (model, start) = (self.state.model().clone(), self.state.estimate());
-        match State::rebuild(model, start, polish, &self.config) {
+        match rebuild::rebuild(model, start, polish, &self.config) {
             Ok(state) => {
                 let base = state.work();
                 self.replace_state(state, base);
                 if polish != Polish::None {
-                    self.after_resolve();
-                    self.edges_since_resolve = 0;
-                    self.fixes_at_resolve = self.state.usable_fixes();
+                    self.schedule.fresh(&self.state);
+                    self.schedule.polished(&self.state);
                 }
             }
             Err(e) => tracing::error!(error = %e, "Refactorisation failed; the estimate is stale."),
@@ -676,25 +439,17 @@ impl Engine {
     fn keyframe_count(&self) -> usize {
         self.state.model.graph.keyframes().len()
     }
-
-    /// Records the fresh factor's size.
-    fn after_resolve(&mut self) {
-        self.nnz_after_resolve = self.state.factor_nnz();
-    }
 }
 
 /// The χ² a relinearisation must gain at least: below it, a gap between
 /// the estimate and its linear model is rounding (a noise-free graph sits
 /// at χ² ~1e-20). The nonlinearity check's re-solve, dearer, waits for a
-/// gap of 1. With a slack of 1 here, early Manhattan snapshots (χ² of a
-/// few units) reached 1.4-1.9× their prefix's optimum; with this one,
-/// every sampled one of four runs stayed within 1.22× (City10000 1.15×;
-/// see `EngineConfig::relinearise_ratio`).
+/// gap of 1; a slack of 1 here let early snapshots (χ² of a few units)
+/// stray to 1.4-1.9× their prefix's optimum.
 const RELINEARISE_SLACK: f64 = 0.01;
 
 /// Drops a replaced state on a thread of its own: freeing a factor's
-/// tens of thousands of columns took 4% of the foreground's time on
-/// City10000.
+/// tens of thousands of columns is work the foreground need not wait for.
 fn retire(old: State) {
     // without a thread (resource limits) the closure, and the state with
     // it, is dropped here
@@ -705,12 +460,4 @@ fn retire(old: State) {
             crate::affinity::run_in_background();
             drop(old)
         });
-}
-
-impl Drop for Engine {
-    fn drop(&mut self) {
-        if let Some(job) = self.job.take() {
-            job.stop();
-        }
-    }
 }

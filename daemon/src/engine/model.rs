@@ -107,8 +107,7 @@ impl Model {
     /// [`Polish::FullInline`] and [`Polish::Closing`], two starts at a
     /// time) starts from the current estimate and from the two-stage
     /// solutions with and without the switches: after a large loop closure
-    /// the estimate can sit in the wrong basin (Manhattan's first re-solve
-    /// reached χ² 50 from it against an optimum of 24), and the two-stage
+    /// the estimate can sit in the wrong basin, and the two-stage
     /// solution does not depend on it ([`Self::starts`]; the closing one
     /// also without the loop closures let in on arrival). [`Polish::Inline`]
     /// starts from the estimate alone.
@@ -173,12 +172,11 @@ impl Model {
             // the two-stage solution under the current switches, and (when
             // some are below 1) under none: a loop closure switched off on
             // arrival against a drifted estimate must get a start that does
-            // not already exclude it (W10000 otherwise lost 13,000 true ones).
+            // not already exclude it.
             // A scheduled re-solve takes that start only while some loop
             // closure is held wrong (below 0.5): the pessimistic weights of
             // most datasets leave a few true ones a little below 1, and no
-            // refresh lands while it runs (City10000's late re-solve:
-            // 0.34–0.68 s with that start, 0.23–0.40 s without)
+            // refresh lands while a longer re-solve runs
             starts.extend(self.linear_start(compact, joined, initial[0], Model::weight));
             let rescue_below = if polish == Polish::Full {
                 REJECTED_BELOW
@@ -191,9 +189,8 @@ impl Model {
             // and, closing (or always, `unadmitted_start`), without the
             // loop closures let in on arrival since the last of these
             // re-solves: a group of agreeing wrong ones can meet a map bent
-            // by the ones before it (Intel + 1000 random-grouped: group
-            // 86's ten entered and held 35 true ones off in 5 runs of 6,
-            // every start ending in that basin)
+            // by the ones before it, and every other start then ends in
+            // their basin
             let unadmitted_due = polish == Polish::Closing || config.outliers.unadmitted_start;
             if unadmitted_due && ids.iter().any(|&e| self.admitted[e]) {
                 let unadmitted = |m: &Model, e: usize| if m.admitted[e] { 0.0 } else { m.weight(e) };

@@ -30,7 +30,7 @@ pub enum Op {
     },
 }
 
-/// How [`State::rebuild`](super::state::State::rebuild) moves the
+/// How [`rebuild`](super::rebuild::rebuild) moves the
 /// linearisation point before it refactorises.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Polish {
@@ -47,11 +47,8 @@ pub enum Polish {
     Closing,
     /// The nonlinearity check's inline re-solve: the robust polish from
     /// the current estimate alone; the next background re-solve has the
-    /// two-stage starts. The start that rescues loop closures switched off
-    /// on arrival is bent by wrong ones and took 1-3 s of a City10000 +
-    /// 1000 keyframe; the two-stage start under the switches reached the
-    /// same optimum as the estimate on every Manhattan check and doubled
-    /// the re-solve (W10000 54.5 -> 45.9 s without it).
+    /// two-stage starts (inline they cost a keyframe seconds and, from the
+    /// estimate's basin, reach the same optimum).
     Inline,
     /// None: refactorise at the estimate.
     None,
@@ -61,15 +58,15 @@ pub enum Polish {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum SnapshotSource {
-    /// One Gauss–Newton step from the last polish (iSAM's scheme). Measured
-    /// best: every sampled Manhattan snapshot within 1.29× of its prefix's
-    /// optimum.
+    /// One Gauss–Newton step from the last polish (iSAM's scheme); the
+    /// default (docs/design.md, "The incremental engine").
     #[default]
     GaussNewton,
     /// The exact two-stage solution, carried by each keyframe's correction
     /// to the last polish: `S_k = O_k ∘ L_k` with `O_k = X*_k ∘ L0_k⁻¹`.
-    /// Measured worse (6.7× on Manhattan, 69× on an early City prefix) and
-    /// no faster: a loop closure's axis correction rewrites the position
-    /// rows of the whole loop.
+    /// Paper A's online formulation, selectable; its snapshots stray further
+    /// from their prefix's optimum and it is no faster, since a loop
+    /// closure's axis correction rewrites the position rows of the whole
+    /// loop (docs/design.md, "The incremental engine").
     Linear,
 }

@@ -13,6 +13,7 @@
 //! last op it applied; the foreground replays the few that came after and
 //! swaps.
 
+use super::rebuild;
 use super::state::{Model, Op, Polish, State};
 use super::EngineConfig;
 use crate::geometry::Pose2;
@@ -98,8 +99,7 @@ impl Job {
     /// Stops the re-solve where it is and drops its outcome without
     /// waiting (as dropping the job does): its polish ends at the next
     /// iteration, it skips the factorisation, and the closed channel ends
-    /// its catching up. Each of City10000's abandoned re-solves otherwise
-    /// held a core for up to half a second.
+    /// its catching up, so an abandoned re-solve frees its core at once.
     pub fn abandon(self) {}
 
     /// Stops the re-solve as [`Self::abandon`] does and waits for its
@@ -139,12 +139,12 @@ pub fn run(
     let start = Instant::now();
     let _span = tracing::debug_span!("resolve", keyframes = model.graph.len(), ?polish).entered();
     let joined = model.joined.clone();
-    let lin = State::polish_model(&mut model, estimate, polish, config, stop);
+    let lin = rebuild::polish_model(&mut model, estimate, polish, config, stop);
     if stop.load(Ordering::Relaxed) {
         tracing::debug!(seconds = start.elapsed().as_secs_f64(), "Re-solve stopped.");
         return None;
     }
-    let state = State::factorise(model, lin, config);
+    let state = rebuild::factorise(model, lin, config);
     let mut last_seq = None;
     let (built, mut replayed) = (start.elapsed().as_secs_f64(), 0);
     let state = state.map(|mut s| {
@@ -152,8 +152,7 @@ pub fn run(
         // costs this re-solve its catch-up accuracy. Each pass takes what
         // is queued; the foreground replays what comes after. A replayed
         // op costs about what it cost the foreground, so chasing the queue
-        // to empty can last forever (a City10000 re-solve caught up for
-        // 2,000 keyframes while the map drifted without one)
+        // to empty need never end while input keeps coming
         s.set_hints(estimate, &joined);
         for _ in 0..CATCH_UP_PASSES {
             let queued = ops.len();

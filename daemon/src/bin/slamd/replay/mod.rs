@@ -1,0 +1,392 @@
+//! `slamd replay FILE`: stream a dataset in time order, one snapshot per
+//! keyframe, and report latency and accuracy.
+//!
+//! A keyframe's edges arrive together, as a frontend publishes them; its
+//! latency runs from their arrival to the snapshot that contains them.
+//! `--embedded` runs the engine in this process (arrival: before the first
+//! edge is applied; snapshot: after the update). Otherwise the edges travel
+//! to a running daemon over shared memory (arrival: before the first is
+//! published; snapshot: received with an acknowledgement of the last).
+
+use crate::solve::file_name;
+use anyhow::{bail, Context};
+use clap::Args;
+use faer::c64;
+use slamd::config::Config;
+use slamd::engine::{EdgeInput, Engine, EngineConfig, FactorWork, FixInput};
+use slamd::geometry::Pose2;
+use slamd::graph::{chi2, KeyframeId, PoseGraph};
+use slamd::io;
+use slamd::solver::{solve_batch, BatchOptions};
+use std::collections::HashMap;
+use std::path::PathBuf;
+
+mod sink;
+pub use sink::{DaemonSink, EmbeddedSink, Sink};
+use std::time::{Duration, Instant};
+
+#[derive(Args, Debug)]
+pub struct ReplayOpts {
+    /// Graph file to stream (edges are sorted by time: max(i, j), min(i, j)).
+    pub file: PathBuf,
+    /// Run the engine in this process instead of talking to a daemon.
+    #[arg(long)]
+    pub embedded: bool,
+    /// Publish at most this many keyframes per second (daemon mode; default:
+    /// each keyframe waits for its snapshot).
+    #[arg(long)]
+    pub rate: Option<f64>,
+    /// Ground truth for the ATE of the final estimate.
+    #[arg(long)]
+    pub ground_truth: Option<PathBuf>,
+    /// Check this many evenly spaced snapshots against the batch optimum of
+    /// their own prefix (slow on big files: one batch solve each).
+    #[arg(long, default_value_t = 0)]
+    pub check_prefixes: usize,
+    /// TOML configuration (namespace, and the engine for --embedded).
+    #[arg(long, env = slamd::config::FILE_VARIABLE)]
+    pub config: Option<PathBuf>,
+    /// Namespace of the daemon (overrides the configuration).
+    #[arg(long)]
+    pub namespace: Option<String>,
+    /// Seconds to wait for the daemon's answer before giving up.
+    #[arg(long, default_value_t = 5.0)]
+    pub timeout: f64,
+    #[command(flatten)]
+    pub gps: crate::gps::GpsOpts,
+    #[command(flatten)]
+    pub robust: crate::robust::RobustOpts,
+    /// Turn the outlier filter off (--embedded).
+    #[arg(long)]
+    pub no_filter: bool,
+    /// Write the final estimate: `.g2o` as a graph, else `id x y theta`.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Write one line per keyframe: `k latency_us`, and with `--embedded`
+    /// the entries of the factor its update walks swept and its
+    /// back-substitutions read, and the factor's entries after it.
+    #[arg(long)]
+    pub trace: Option<PathBuf>,
+    /// Print one JSON object instead of a table.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Latency percentiles of a run, in microseconds.
+pub struct Latency {
+    pub p50: f64,
+    pub p99: f64,
+    pub max: f64,
+}
+
+impl Latency {
+    pub fn of(mut samples: Vec<f64>) -> Latency {
+        samples.sort_by(f64::total_cmp);
+        let at = |q: f64| {
+            if samples.is_empty() {
+                0.0
+            } else {
+                samples[((samples.len() - 1) as f64 * q).round() as usize]
+            }
+        };
+        Latency {
+            p50: at(0.5),
+            p99: at(0.99),
+            max: at(1.0),
+        }
+    }
+}
+
+/// One keyframe of a replay, with what arrives with it.
+pub struct Step {
+    pub id: KeyframeId,
+    /// The edges whose newer end it is.
+    pub edges: Vec<EdgeInput>,
+    /// Their indices in the graph (file order).
+    pub file_index: Vec<usize>,
+    /// The GPS fixes taken at it.
+    pub fixes: Vec<FixInput>,
+}
+
+/// A graph's keyframes in order, each with the edges that it makes
+/// available (its newer end) and its fixes, as engine inputs.
+pub fn stream(graph: &PoseGraph, fixes: &[FixInput]) -> Vec<Step> {
+    let mut by_id: HashMap<KeyframeId, Vec<FixInput>> = HashMap::new();
+    for f in fixes {
+        by_id.entry(f.keyframe).or_default().push(*f);
+    }
+    let index = graph.by_newer();
+    let groups: Vec<Vec<EdgeInput>> = index
+        .iter()
+        .map(|g| g.iter().map(|&e| graph.edge_input(e)).collect())
+        .collect();
+    groups
+        .into_iter()
+        .enumerate()
+        .zip(index)
+        .map(|((k, edges), file_index)| {
+            let id = graph.id_of(k);
+            Step {
+                id,
+                edges,
+                file_index,
+                fixes: by_id.remove(&id).unwrap_or_default(),
+            }
+        })
+        .collect()
+}
+
+/// What a replay measured.
+pub struct Outcome {
+    pub latencies: Vec<f64>,
+    /// Georeferenced (east, north) of the final estimate, by keyframe id.
+    pub enu: HashMap<KeyframeId, c64>,
+    pub trace: Vec<(usize, f64)>,
+    /// When asked for, per keyframe (by index): the engine's work on it
+    /// and the factor's entries after it (embedded only, else empty).
+    pub work: Vec<(FactorWork, usize)>,
+    pub total_s: f64,
+    /// Of `total_s`, the seconds from the last keyframe's snapshot to the
+    /// closing estimate (the re-solve that ends the stream).
+    pub closing_s: f64,
+    pub resolves: usize,
+    pub poses: Vec<Pose2>,
+    pub checked: Vec<(usize, Vec<Pose2>)>,
+    /// The final switch of each edge, in file order (embedded only).
+    pub switches: Option<Vec<f64>>,
+}
+
+/// Streams `graph` into `sink`; `progress` is told of each keyframe.
+pub fn replay(
+    graph: &PoseGraph,
+    fixes: &[FixInput],
+    sink: &mut dyn Sink,
+    checkpoints: &[usize],
+    record_work: bool,
+    mut progress: impl FnMut(usize),
+) -> anyhow::Result<Outcome> {
+    let mut latencies = Vec::with_capacity(graph.len());
+    let mut work = Vec::new();
+    let mut before = FactorWork::default();
+    let mut checked = Vec::new();
+    let steps = stream(graph, fixes);
+    let sent: Vec<usize> = steps.iter().flat_map(|s| s.file_index.iter().copied()).collect();
+    let start = Instant::now();
+    for (k, step) in steps.iter().enumerate() {
+        latencies.extend(sink.keyframe(k, step)?);
+        // counting the factor's entries walks its columns: only on request
+        if let Some(stats) = record_work.then(|| sink.engine_stats()).flatten() {
+            work.push((stats.work - before, stats.factor_nnz));
+            before = stats.work;
+        }
+        if checkpoints.contains(&k) {
+            latencies.extend(sink.drain()?);
+            let by_id = sink.poses()?;
+            let poses = graph.keyframes()[..=k]
+                .iter()
+                .map(|kf| by_id.get(&kf.id).copied())
+                .collect::<Option<Vec<_>>>();
+            checked.push((k, poses.context("a snapshot lacks keyframes it should hold")?));
+        }
+        progress(k);
+    }
+    latencies.extend(sink.drain()?);
+    let closing = Instant::now();
+    let (by_id, resolves, ready) = sink.finish()?;
+    let total_s = ready.duration_since(start).as_secs_f64();
+    let closing_s = ready.duration_since(closing).as_secs_f64();
+    let enu = sink.enu()?;
+    let switches = sink.switches().map(|sw| {
+        let mut by_file = vec![1.0; graph.edges().len()];
+        for (n, &e) in sent.iter().enumerate() {
+            by_file[e] = sw[n];
+        }
+        by_file
+    });
+    let poses = graph
+        .keyframes()
+        .iter()
+        .map(|k| by_id.get(&k.id).copied())
+        .collect::<Option<Vec<_>>>()
+        .with_context(|| {
+            format!(
+                "{} keyframes are missing from the final snapshot",
+                graph.len() - by_id.len()
+            )
+        })?;
+    latencies.sort_by_key(|&(k, _)| k);
+    Ok(Outcome {
+        enu,
+        switches,
+        trace: latencies.clone(),
+        work,
+        latencies: latencies.into_iter().map(|(_, l)| l).collect(),
+        total_s,
+        closing_s,
+        resolves,
+        poses,
+        checked,
+    })
+}
+
+pub fn run(opts: ReplayOpts) -> anyhow::Result<()> {
+    let config = crate::run::load_config(opts.config.as_deref(), opts.namespace.as_deref())?;
+    let graph = io::read_graph(&opts.file)?;
+    graph.check_connected()?;
+    let truth = opts
+        .ground_truth
+        .as_deref()
+        .map(io::read_ground_truth)
+        .transpose()?;
+    let checkpoints: Vec<usize> = (1..=opts.check_prefixes)
+        .map(|i| (i * graph.len() / (opts.check_prefixes + 1)).max(1))
+        .collect();
+    let mut sink: Box<dyn Sink> = if opts.embedded {
+        Box::new(EmbeddedSink(Engine::new(engine_config(&opts, &config))))
+    } else {
+        if opts.rate.is_some_and(|r| r.is_nan() || r <= 0.0) {
+            bail!("--rate must be > 0");
+        }
+        Box::new(DaemonSink::connect(
+            &config.namespace,
+            &config,
+            Duration::from_secs_f64(opts.timeout),
+            opts.rate,
+        )?)
+    };
+    let gps = crate::gps::load(&opts.gps, &graph)?;
+    let fixes = gps.as_ref().map_or(&[][..], |g| &g.wire[..]);
+    let out = replay(
+        &graph,
+        fixes,
+        sink.as_mut(),
+        &checkpoints,
+        opts.trace.is_some(),
+        |_| {},
+    )?;
+    let enu_rmse = gps.as_ref().and_then(|g| {
+        let enu: HashMap<usize, c64> = (out.enu.iter())
+            .filter_map(|(id, p)| Some((graph.index_of(*id)?, *p)))
+            .collect();
+        crate::gps::rmse(&g.truth, |k| enu.get(&k).copied())
+    });
+    if let Some(path) = &opts.trace {
+        let lines: Vec<String> = (out.trace.iter())
+            .map(|(k, l)| match out.work.get(*k) {
+                Some((w, nnz)) => format!("{k} {l:.1} {} {} {nnz}", w.walked, w.solved),
+                None => format!("{k} {l:.1}"),
+            })
+            .collect();
+        std::fs::write(path, lines.join("\n") + "\n")
+            .with_context(|| format!("writing {}", path.display()))?;
+    }
+    if let Some(path) = &opts.out {
+        crate::solve::write_result(path, &graph, &out.poses)?;
+    }
+    let final_chi2 = chi2(&graph, &out.poses);
+    let ate = truth
+        .as_ref()
+        .and_then(|t| slamd::eval::ate(&graph, &out.poses, t))
+        .map(|a| a.rmse);
+    let ratios = out
+        .checked
+        .iter()
+        .map(|(k, poses)| {
+            let prefix = graph.prefix(k + 1);
+            let best = solve_batch(
+                &prefix,
+                &BatchOptions {
+                    polish: true,
+                    ..Default::default()
+                },
+            )?;
+            Ok((k + 1, chi2(&prefix, poses) / best.chi2.max(f64::MIN_POSITIVE)))
+        })
+        .collect::<anyhow::Result<Vec<(usize, f64)>>>()?;
+    let worst_ratio = ratios.iter().map(|&(_, r)| r).reduce(f64::max);
+    let robust = crate::robust::Rejected::of(&graph, out.switches.as_deref());
+    let lat = Latency::of(out.latencies);
+    if opts.json {
+        let v = serde_json::json!({
+            "file": opts.file.display().to_string(),
+            "mode": sink.mode(),
+            "keyframes": graph.len(),
+            "edges": graph.edges().len(),
+            "p50_us": lat.p50,
+            "p99_us": lat.p99,
+            "max_us": lat.max,
+            "total_s": out.total_s,
+            "closing_s": out.closing_s,
+            "resolves": out.resolves,
+            "engine": sink.engine_stats().map(|s| serde_json::json!({
+                "refreshes": s.refreshes,
+                "relinearisations": s.relinearisations,
+                "nonlinear_resolves": s.nonlinear_resolves,
+                "drift_resolves": s.drift_resolves,
+                "recoveries": s.recoveries,
+                "walked_entries": s.work.walked,
+                "solved_entries": s.work.solved,
+            })),
+            "chi2": final_chi2,
+            "ate": ate,
+            "prefixes_checked": out.checked.len(),
+            "worst_prefix_ratio": worst_ratio,
+            "prefix_ratios": ratios,
+            "loop_closures": robust.loop_closures,
+            "switched_off": robust.rejected.len(),
+            "rejected_edges": out.switches.as_ref().map(|_| &robust.rejected),
+            "gps_fixes": fixes.len(),
+            "georeferenced": !out.enu.is_empty(),
+            "enu_rmse": enu_rmse,
+        });
+        println!("{v}");
+    } else {
+        println!(
+            "{} ({}): {} keyframes, {} edges",
+            file_name(&opts.file),
+            sink.mode(),
+            graph.len(),
+            graph.edges().len()
+        );
+        println!(
+            "latency per keyframe  p50 {:.0} µs  p99 {:.0} µs  max {:.0} µs",
+            lat.p50, lat.p99, lat.max
+        );
+        println!(
+            "total                 {:.3} s  ({} re-solves; closing one {:.3} s)",
+            out.total_s, out.resolves, out.closing_s
+        );
+        println!("final chi2            {final_chi2:.3}");
+        if let Some(a) = ate {
+            println!("ate                   {a:.4} m");
+        }
+        if let Some(e) = enu_rmse {
+            println!("enu rmse              {e:.4} m  ({} fixes)", fixes.len());
+        }
+        if out.switches.is_some() {
+            println!(
+                "loop closures         {} ({} switched off)",
+                robust.loop_closures,
+                robust.rejected.len()
+            );
+        }
+        if let Some(w) = worst_ratio {
+            println!(
+                "worst snapshot/prefix-optimum chi2 over {} prefixes: {w:.4}",
+                out.checked.len()
+            );
+        }
+    }
+    Ok(())
+}
+
+fn engine_config(opts: &ReplayOpts, config: &Config) -> EngineConfig {
+    let mut c = config.engine();
+    if let Some(o) = opts.gps.gps_origin {
+        c.gps.origin = Some(o);
+    }
+    c.gps.absolute = !opts.gps.gps_paper_only;
+    c.outliers = opts.robust.apply(c.outliers);
+    c.outliers.enabled &= !opts.no_filter;
+    c
+}

@@ -1,0 +1,240 @@
+//! Where a replay sends its keyframes: [`EmbeddedSink`] (the engine in
+//! this process) or [`DaemonSink`] (a running daemon over shared memory).
+
+use super::Step;
+use faer::c64;
+use slamd::config::Config;
+use slamd::engine::{Engine, EngineStats};
+use slamd::geometry::Pose2;
+use slamd::graph::KeyframeId;
+use slamd::ipc::{Frontend, Snapshots};
+use std::collections::{HashMap, VecDeque};
+use std::time::{Duration, Instant};
+
+/// Where a replay sends its keyframes.
+pub trait Sink {
+    /// Sends keyframe `k` with its edges and fixes; returns latencies (µs)
+    /// of the keyframes whose snapshot arrived meanwhile, with their index.
+    fn keyframe(&mut self, k: usize, step: &Step) -> anyhow::Result<Vec<(usize, f64)>>;
+    /// Waits for every outstanding snapshot; returns their latencies.
+    fn drain(&mut self) -> anyhow::Result<Vec<(usize, f64)>>;
+    /// The current estimate, by keyframe id.
+    fn poses(&mut self) -> anyhow::Result<HashMap<KeyframeId, Pose2>>;
+    /// The final estimate after the re-solve that ends the stream, the
+    /// number of re-solves, and when that estimate was ready.
+    fn finish(&mut self) -> anyhow::Result<(HashMap<KeyframeId, Pose2>, usize, Instant)>;
+    /// The georeferenced (east, north) of each keyframe; empty until GPS
+    /// has georeferenced the map.
+    fn enu(&mut self) -> anyhow::Result<HashMap<KeyframeId, c64>>;
+    /// The outlier filter's switch of each edge in the order sent, when
+    /// the sink can tell.
+    fn switches(&mut self) -> Option<Vec<f64>>;
+    /// "embedded" or "daemon".
+    fn mode(&self) -> &'static str;
+    /// The engine's counters, when it runs in this process.
+    fn engine_stats(&self) -> Option<EngineStats> {
+        None
+    }
+}
+
+/// The engine in this process.
+pub struct EmbeddedSink(pub Engine);
+
+impl Sink for EmbeddedSink {
+    fn keyframe(&mut self, k: usize, step: &Step) -> anyhow::Result<Vec<(usize, f64)>> {
+        self.0.add_keyframe(step.id, None)?;
+        let arrival = Instant::now();
+        for e in &step.edges {
+            self.0.add_edge(*e)?;
+        }
+        for f in &step.fixes {
+            self.0.add_gps(*f)?;
+        }
+        self.0.update();
+        Ok(if step.edges.is_empty() {
+            vec![]
+        } else {
+            vec![(k, arrival.elapsed().as_secs_f64() * 1e6)]
+        })
+    }
+
+    fn drain(&mut self) -> anyhow::Result<Vec<(usize, f64)>> {
+        Ok(vec![])
+    }
+
+    fn poses(&mut self) -> anyhow::Result<HashMap<KeyframeId, Pose2>> {
+        Ok(self.0.snapshot().poses().collect())
+    }
+
+    fn finish(&mut self) -> anyhow::Result<(HashMap<KeyframeId, Pose2>, usize, Instant)> {
+        self.0.resolve_now();
+        Ok((self.poses()?, self.0.stats().resolves, Instant::now()))
+    }
+
+    fn enu(&mut self) -> anyhow::Result<HashMap<KeyframeId, c64>> {
+        let snap = self.0.snapshot();
+        Ok(snap.enu_poses().map(|(id, p)| (id, p.position())).collect())
+    }
+
+    fn switches(&mut self) -> Option<Vec<f64>> {
+        Some(self.0.switches().to_vec())
+    }
+
+    fn mode(&self) -> &'static str {
+        "embedded"
+    }
+
+    fn engine_stats(&self) -> Option<EngineStats> {
+        Some(self.0.stats())
+    }
+}
+
+/// A running daemon, over shared memory.
+pub struct DaemonSink {
+    frontend: Frontend,
+    snapshots: Snapshots,
+    timeout: Duration,
+    namespace: String,
+    /// (keyframe index, last message number, publish time) awaiting a snapshot
+    pending: VecDeque<(usize, u64, Instant)>,
+    latest: Option<slamd::ipc::SnapshotSample>,
+    pace: Option<(Instant, Duration)>,
+}
+
+impl DaemonSink {
+    pub fn connect(
+        namespace: &str,
+        config: &Config,
+        timeout: Duration,
+        rate: Option<f64>,
+    ) -> anyhow::Result<Self> {
+        let frontend = Frontend::connect_to(namespace, config.backpressure())?;
+        let snapshots = Snapshots::open(namespace)?;
+        Ok(Self {
+            frontend,
+            snapshots,
+            timeout,
+            namespace: namespace.to_string(),
+            pending: VecDeque::new(),
+            latest: None,
+            pace: rate.map(|hz| (Instant::now(), Duration::from_secs_f64(1.0 / hz))),
+        })
+    }
+
+    /// Takes in the snapshots that arrived; returns the latencies they settle.
+    fn collect(&mut self, wait: Duration) -> anyhow::Result<Vec<(usize, f64)>> {
+        let mut done = Vec::new();
+        if let Some(s) = self.snapshots.wait(wait)? {
+            let now = Instant::now();
+            if let Some(acked) = s.header().ack_of(self.frontend.id()) {
+                while self.pending.front().is_some_and(|p| p.1 <= acked) {
+                    let (k, _, t) = self.pending.pop_front().expect("non-empty");
+                    done.push((k, now.duration_since(t).as_secs_f64() * 1e6));
+                }
+            }
+            self.latest = Some(s);
+        }
+        Ok(done)
+    }
+
+    fn no_answer(&self) -> anyhow::Error {
+        anyhow::anyhow!(
+            "the daemon serving `{}` did not answer within {:.1} s (is `slamd run` alive?)",
+            self.namespace,
+            self.timeout.as_secs_f64()
+        )
+    }
+}
+
+impl Sink for DaemonSink {
+    fn keyframe(&mut self, k: usize, step: &Step) -> anyhow::Result<Vec<(usize, f64)>> {
+        let mut done = Vec::new();
+        if let Some((start, period)) = self.pace {
+            // paced: take in snapshots until this keyframe's slot
+            let slot = start + period * k as u32;
+            while let Some(left) = slot.checked_duration_since(Instant::now()) {
+                done.extend(self.collect(left)?);
+            }
+        }
+        let arrival = Instant::now();
+        let mut last = self.frontend.add_keyframe(step.id, 0, None)?;
+        for e in &step.edges {
+            last = self.frontend.add_edge(e)?;
+        }
+        for f in &step.fixes {
+            last = self.frontend.add_gps(f)?;
+        }
+        self.frontend.flush()?;
+        if !step.edges.is_empty() {
+            self.pending.push_back((k, last, arrival));
+        }
+        if self.pace.is_none() {
+            done.extend(self.drain()?);
+        }
+        Ok(done)
+    }
+
+    fn drain(&mut self) -> anyhow::Result<Vec<(usize, f64)>> {
+        let mut done = Vec::new();
+        let deadline = Instant::now() + self.timeout;
+        while !self.pending.is_empty() {
+            let left = deadline.saturating_duration_since(Instant::now());
+            if left.is_zero() {
+                return Err(self.no_answer());
+            }
+            done.extend(self.collect(left)?);
+        }
+        Ok(done)
+    }
+
+    fn poses(&mut self) -> anyhow::Result<HashMap<KeyframeId, Pose2>> {
+        let s = self.latest.as_ref().ok_or_else(|| self.no_answer())?;
+        Ok(s.poses()
+            .iter()
+            .map(|p| (p.id, Pose2::new(p.x, p.y, p.theta)))
+            .collect())
+    }
+
+    fn finish(&mut self) -> anyhow::Result<(HashMap<KeyframeId, Pose2>, usize, Instant)> {
+        self.drain()?;
+        // the daemon re-solves once input pauses, and again if edges came
+        // in during that re-solve: take snapshots until it is quiet (the
+        // first re-solved one may predate the last edges' polish)
+        let mut ready = Instant::now();
+        let deadline = ready + self.timeout.max(Duration::from_secs(30));
+        while Instant::now() < deadline {
+            match self.snapshots.wait(QUIET)? {
+                Some(s) => {
+                    self.latest = Some(s);
+                    ready = Instant::now();
+                }
+                None => break,
+            }
+        }
+        let resolves = self.latest.as_ref().map_or(0, |s| s.header().resolves as usize);
+        Ok((self.poses()?, resolves, ready))
+    }
+
+    fn enu(&mut self) -> anyhow::Result<HashMap<KeyframeId, c64>> {
+        let s = self.latest.as_ref().ok_or_else(|| self.no_answer())?;
+        if s.header().georeferenced == 0 {
+            return Ok(HashMap::new());
+        }
+        Ok(s.poses()
+            .iter()
+            .map(|p| (p.id, c64::new(p.east, p.north)))
+            .collect())
+    }
+
+    fn switches(&mut self) -> Option<Vec<f64>> {
+        None
+    }
+
+    fn mode(&self) -> &'static str {
+        "daemon"
+    }
+}
+
+/// No snapshot for this long after the stream ends: the daemon's closing
+/// re-solves are done.
+const QUIET: Duration = Duration::from_secs(3);

@@ -1,0 +1,140 @@
+//! [`Background`]: the re-solve or refresh running on its own thread, and
+//! what the foreground owes it.
+//!
+//! While a job runs, every op the foreground applies is forwarded to it
+//! and kept in a log, numbered; after each update the foreground forwards
+//! its estimate of the keyframes that joined, as catch-up hints. When the
+//! job finishes, [`catch_up`] replays the ops it had not applied onto its
+//! fresh state, which then replaces the foreground's.
+
+use super::report::FactorWork;
+use super::resolve::{self, Job, Outcome};
+use super::state::{Op, State};
+use super::{EngineConfig, Polish};
+use crate::sparse::FactorError;
+use std::time::Instant;
+
+/// The running job, if any, and the ops applied since it started.
+#[derive(Default)]
+pub struct Background {
+    job: Option<Job>,
+    log: Vec<(u64, Op)>,
+    /// The next op's number.
+    seq: u64,
+    /// Keyframes below this index are known to the running job's hints
+    /// (handed over, or forwarded after an update).
+    hinted: usize,
+}
+
+impl Background {
+    /// Whether a job runs.
+    pub fn running(&self) -> bool {
+        self.job.is_some()
+    }
+
+    /// Numbers `op`, applied in the foreground, and forwards it to the
+    /// running job.
+    pub fn record(&mut self, op: Op) {
+        if let Some(job) = &self.job {
+            job.forward(self.seq, op.clone());
+            self.log.push((self.seq, op));
+        }
+        self.seq += 1;
+    }
+
+    /// Forwards `state`'s estimates of the keyframes added since the last
+    /// call (those that joined) to the running job.
+    pub fn forward_estimates(&mut self, state: &State) {
+        let Some(job) = &self.job else {
+            return;
+        };
+        let (model, estimate) = (&state.model, state.estimate());
+        let n = model.graph.len();
+        for k in (self.hinted..n).filter(|&k| model.joined[k]) {
+            job.hint(k, estimate[k]);
+        }
+        self.hinted = n;
+    }
+
+    /// Starts a job on `state`'s model and estimate.
+    pub fn start(&mut self, state: &State, config: &EngineConfig, polish: Polish) {
+        let (model, estimate) = (state.model().clone(), state.estimate().to_vec());
+        self.log.clear();
+        self.hinted = state.model.graph.len();
+        self.job = Some(Job::spawn(model, estimate, config.clone(), polish));
+    }
+
+    /// The finished job's outcome and the ops applied since it started.
+    pub fn poll(&mut self) -> Option<(Outcome, Vec<(u64, Op)>)> {
+        let outcome = self.job.as_mut()?.try_finish()?;
+        self.job = None;
+        Some((outcome, std::mem::take(&mut self.log)))
+    }
+
+    /// Abandons the running job, if any: it stops at its next check and
+    /// its outcome is dropped.
+    pub fn abandon(&mut self) {
+        if let Some(job) = self.job.take() {
+            job.abandon();
+            self.log.clear();
+        }
+    }
+}
+
+impl Drop for Background {
+    fn drop(&mut self) {
+        if let Some(job) = self.job.take() {
+            job.stop();
+        }
+    }
+}
+
+/// Runs a job inline on `state`'s model and estimate (no background
+/// thread).
+pub fn run_inline(state: &State, config: &EngineConfig, polish: Polish) -> Option<Outcome> {
+    let (model, estimate) = (state.model().clone(), state.estimate());
+    let (_tx, rx) = crossbeam::channel::unbounded();
+    let never = std::sync::atomic::AtomicBool::new(false);
+    resolve::run(model, estimate, config, polish, &rx, &never)
+}
+
+/// The job's fresh `state`, which applied the ops up to `last_seq`,
+/// caught up with the rest of the `log`: they join where `foreground`'s
+/// solves put them. Returns it with its work counters as they stood before
+/// the catch-up (the catch-up is this thread's work), or `None` when the
+/// job failed or an op cannot be replayed (the foreground keeps its state).
+pub fn catch_up(
+    state: Result<State, FactorError>,
+    last_seq: Option<u64>,
+    log: Vec<(u64, Op)>,
+    foreground: &State,
+    config: &EngineConfig,
+) -> Option<(State, FactorWork)> {
+    let Ok(mut state) = state else {
+        tracing::warn!("Re-solve failed; keeping the current factor.");
+        return None;
+    };
+    let base = state.work();
+    state.set_hints(foreground.estimate(), &foreground.model.joined);
+    let (caught_up, mut replayed) = (Instant::now(), 0);
+    for (seq, op) in log {
+        if last_seq.is_none_or(|last| seq > last) {
+            replayed += 1;
+            if let Err(e) = state.replay(&op, config.wildfire_threshold) {
+                tracing::warn!(error = %e, seq, ?op, "Re-solve cannot replay an op; discarded.");
+                return None;
+            }
+        }
+    }
+    if let Err(e) = state.join_pending() {
+        tracing::warn!(error = %e, "Re-solve cannot connect the replayed edges; discarded.");
+        return None;
+    }
+    state.clear_hints();
+    tracing::debug!(
+        replayed,
+        catch_up_seconds = caught_up.elapsed().as_secs_f64(),
+        "Re-solve caught up."
+    );
+    Some((state, base))
+}

@@ -1,0 +1,216 @@
+//! Rebuilding a [`State`]: the polish that moves the linearisation point
+//! ([`polish_model`]) and the fresh factor at it ([`factorise`]); both
+//! together are [`rebuild`]. A background re-solve runs the two halves on
+//! its own thread, the foreground runs [`rebuild`] inline.
+
+use super::model::Model;
+use super::op::Polish;
+use super::solvers::Solvers;
+use super::state::State;
+use super::EngineConfig;
+use crate::geometry::Pose2;
+use crate::sparse::ordering::amd_newest_last;
+use crate::sparse::FactorError;
+use std::sync::atomic::AtomicBool;
+
+/// A fresh state from `model`: polished from `start` as `polish` says,
+/// re-ordered with the newest `recent_last` keyframes last,
+/// refactorised.
+pub fn rebuild(
+    mut model: Model,
+    start: &[Pose2],
+    polish: Polish,
+    config: &EngineConfig,
+) -> Result<State, FactorError> {
+    let lin = polish_model(&mut model, start, polish, config, &AtomicBool::new(false));
+    factorise(model, lin, config)
+}
+
+/// The first half of [`rebuild`]: unjoins what no weighted edge
+/// holds and polishes `model` from `start` as `polish` says, setting
+/// its switches and georeference; returns the linearisation point of
+/// every keyframe. Once `stop` is set the polish ends where it is and
+/// the georeference is left as it was.
+pub fn polish_model(
+    model: &mut Model,
+    start: &[Pose2],
+    polish: Polish,
+    config: &EngineConfig,
+    stop: &AtomicBool,
+) -> Vec<Pose2> {
+    model.unjoin_unconstrained();
+    let n = model.graph.len();
+    let mut lin = start.to_vec();
+    lin.resize(n, Pose2::IDENTITY);
+    if polish != Polish::None {
+        let (joined, compact) = model.compact_joined();
+        let started = std::time::Instant::now();
+        let mut poses = model.robust_polish(config, &compact, &joined, &lin, polish, stop);
+        tracing::debug!(seconds = started.elapsed().as_secs_f64(), ?polish, "Polished.");
+        if !stop.load(std::sync::atomic::Ordering::Relaxed) {
+            let (edges, _) = model.compact_edges(&compact, Model::weight);
+            model.georeference(&config.gps, &edges, &compact, &mut poses, &config.polish);
+        }
+        for (c, &k) in joined.iter().enumerate() {
+            lin[k] = poses[c];
+        }
+    }
+    lin
+}
+
+/// The second half of [`rebuild`]: the fresh factor of `model`
+/// linearised at `lin`.
+pub fn factorise(mut model: Model, lin: Vec<Pose2>, config: &EngineConfig) -> Result<State, FactorError> {
+    let recent = config.recent_last;
+    let (joined, compact) = model.compact_joined();
+    let active: Vec<(usize, f64)> = (0..model.graph.edges().len())
+        .filter(|&e| model.applied[e] && model.weight(e) > 0.0)
+        .map(|e| (e, model.weight(e)))
+        .collect();
+    // every fix on a joined keyframe enters the fresh factor
+    let mut priors = Vec::new();
+    for f in 0..model.fixes.len() {
+        let on = model.joined[model.fixes[f].keyframe];
+        let prior = if on { model.prior(f) } else { None };
+        model.fix_applied[f] = prior.is_some();
+        priors.extend(prior);
+    }
+    // elimination order over joined keyframes except the gauge
+    let pairs = active.iter().filter_map(|&(e, _)| {
+        let edge = &model.graph.edges()[e];
+        let (a, b) = (compact[edge.from], compact[edge.to]);
+        (a > 0 && b > 0).then(|| (a - 1, b - 1))
+    });
+    let perm = amd_newest_last(joined.len().saturating_sub(1), pairs, recent);
+    let order: Vec<usize> = perm.iter().map(|&c| joined[c + 1]).collect();
+    let (solvers, estimate) =
+        Solvers::build(config, &model.graph, &model.joined, &active, &priors, lin, &order)?;
+    Ok(State::assemble(config, model, solvers, estimate))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::engine::{EdgeInput, Op};
+    use crate::graph::{EdgeKind, Information, KeyframeId};
+    use crate::outliers::{OutlierConfig, OFF_BELOW};
+
+    fn keyframe(id: KeyframeId) -> Op {
+        Op::Keyframe { id, guess: None }
+    }
+
+    fn odometry(from: KeyframeId, to: KeyframeId, step: Pose2) -> Op {
+        Op::Edge(EdgeInput::new(
+            from,
+            to,
+            step,
+            Information::identity(),
+            EdgeKind::Odometry,
+        ))
+    }
+
+    /// Six keyframes 1 m apart along x, then two loop closures from 0 to
+    /// 5 (edges 5 and 6): one `x` metres long (let in on arrival when near
+    /// 5) and one far off (turned away); solved.
+    fn line_closed(config: &EngineConfig, x: f64) -> State {
+        let step = Pose2::new(1.0, 0.0, 0.0);
+        let mut state = State::new(config);
+        for k in 0..6 {
+            state.replay(&keyframe(k), 0.0).unwrap();
+            if k > 0 {
+                state.replay(&odometry(k - 1, k, step), 0.0).unwrap();
+            }
+        }
+        for z in [Pose2::new(x, 0.0, 0.0), Pose2::new(-40.0, 30.0, 2.0)] {
+            let closure = EdgeInput::new(0, 5, z, Information::identity(), EdgeKind::LoopClosure);
+            state.replay(&Op::Edge(closure), 0.0).unwrap();
+        }
+        state.solve(0.0).unwrap();
+        state
+    }
+
+    /// A loop closure let in on arrival is marked until a multi-start
+    /// re-solve has judged it (the closing one gets a start without the
+    /// marked ones); one turned away on arrival is not marked.
+    #[test]
+    fn loop_closures_let_in_on_arrival_are_marked_until_a_full_resolve() {
+        let config = EngineConfig::default();
+        let state = line_closed(&config, 5.0);
+        let (agreeing, wrong) = (5, 6);
+        assert!(state.model.switch[agreeing] >= OFF_BELOW && state.model.admitted[agreeing]);
+        assert!(state.model.switch[wrong] < OFF_BELOW && !state.model.admitted[wrong]);
+        // a relinearisation is no judgement; a multi-start re-solve is
+        let estimate = state.estimate().to_vec();
+        let relinearised = rebuild(state.model.clone(), &estimate, Polish::None, &config).unwrap();
+        assert!(relinearised.model.admitted[agreeing]);
+        let resolved = rebuild(state.model.clone(), &estimate, Polish::Full, &config).unwrap();
+        assert!(!resolved.model.admitted.iter().any(|&a| a));
+    }
+
+    /// The start without the loop closures let in on arrival: the closing
+    /// re-solve's always, every multi-start re-solve's with
+    /// `unadmitted_start`, the inline polish's never.
+    #[test]
+    fn the_start_without_admitted_loop_closures_goes_where_configured() {
+        let config = EngineConfig::default();
+        // the loop closure let in pulls keyframe 5 by 0.3 m
+        let state = line_closed(&config, 5.3);
+        assert!(state.model.admitted[5] && !state.model.admitted[6]);
+        let (joined, compact) = state.model.compact_joined();
+        let (_, ids) = state.model.compact_edges(&compact, |m, e| m.scale[e]);
+        let initial: Vec<Pose2> = joined.iter().map(|&k| state.estimate()[k]).collect();
+        let starts = |config: &EngineConfig, polish| {
+            state
+                .model
+                .starts(config, &compact, &joined, &initial, &ids, polish)
+        };
+        let always = EngineConfig {
+            outliers: OutlierConfig {
+                unadmitted_start: true,
+                ..config.outliers
+            },
+            ..config.clone()
+        };
+        // the estimate, the two-stage solution under the switches, under none
+        assert_eq!(starts(&config, Polish::Full).len(), 3);
+        assert_eq!(starts(&config, Polish::Inline).len(), 1);
+        assert_eq!(starts(&always, Polish::Inline).len(), 1);
+        for (config, polish) in [(&config, Polish::Closing), (&always, Polish::Full)] {
+            let s = starts(config, polish);
+            assert_eq!(s.len(), 4);
+            // under the switches keyframe 5 is pulled toward 5.3; without
+            // the loop closure let in, odometry alone puts it at 5
+            assert!(s[1][5].x > 5.1, "{:?}", s[1][5]);
+            assert!((s[3][5].x - 5.0).abs() < 1e-9, "{:?}", s[3][5]);
+        }
+    }
+
+    /// The start under no switches rescues loop closures held wrong; a
+    /// scheduled re-solve takes it only while one is (below 0.5), the
+    /// closing one whenever a switch is below 1.
+    #[test]
+    fn a_scheduled_resolve_takes_the_rescue_start_only_while_one_is_held_wrong() {
+        let config = EngineConfig::default();
+        let mut state = line_closed(&config, 5.0);
+        let wrong = 6;
+        let mut counts = |switch: f64| {
+            state.model.switch[wrong] = switch;
+            let (joined, compact) = state.model.compact_joined();
+            let (_, ids) = state.model.compact_edges(&compact, |m, e| m.scale[e]);
+            let initial: Vec<Pose2> = joined.iter().map(|&k| state.estimate()[k]).collect();
+            let starts = |polish| {
+                state
+                    .model
+                    .starts(&config, &compact, &joined, &initial, &ids, polish)
+                    .len()
+            };
+            (starts(Polish::Full), starts(Polish::FullInline))
+        };
+        // held wrong: the estimate, under the switches, under none
+        assert_eq!(counts(0.3), (3, 3));
+        // only down-weighted: the scheduled re-solve skips the rescue
+        assert_eq!(counts(0.7), (2, 3));
+        // every switch at 1: neither takes it
+        assert_eq!(counts(1.0), (2, 2));
+    }
+}

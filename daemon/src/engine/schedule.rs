@@ -1,0 +1,78 @@
+//! [`Schedule`]: when the next re-solve or refresh is due.
+//!
+//! A re-solve (polish, fresh ordering, fresh factor) is due after
+//! `resolve_every_edges` new edges, when the factor has grown
+//! `resolve_fill_ratio` times past its size after the last re-solve, or
+//! when GPS fixes call for a georeference: as soon as two are in the
+//! estimate, and again whenever their number has doubled. A refresh (the
+//! same without the polish) is due after `refresh_every_edges` new edges.
+//! The caller checks that the background thread is free.
+
+use super::state::State;
+use super::{EngineConfig, Polish};
+
+/// Counters since the last re-solve and refresh.
+#[derive(Clone, Debug, Default)]
+pub struct Schedule {
+    edges_since_resolve: usize,
+    edges_since_refresh: usize,
+    /// Stored entries of the factor after the last re-solve.
+    nnz_after_resolve: usize,
+    /// Fixes in the estimate at the last re-solve.
+    fixes_at_resolve: usize,
+}
+
+impl Schedule {
+    /// A new edge arrived.
+    pub fn edge_added(&mut self) {
+        self.edges_since_resolve += 1;
+        self.edges_since_refresh += 1;
+    }
+
+    /// Whether edges arrived since the last re-solve.
+    pub fn edges_since_resolve(&self) -> bool {
+        self.edges_since_resolve > 0
+    }
+
+    /// Whether a re-solve is due for `state`.
+    pub fn resolve_due(&self, config: &EngineConfig, state: &State) -> bool {
+        let c = config;
+        let by_count = c.resolve_every_edges > 0 && self.edges_since_resolve >= c.resolve_every_edges;
+        let by_fill = c.resolve_fill_ratio > 0.0
+            && self.nnz_after_resolve > 0
+            && state.factor_nnz() as f64 > c.resolve_fill_ratio * self.nnz_after_resolve as f64;
+        // the count of fixes on joined keyframes is a scan, so it waits
+        // until all fixes together could pass
+        let due = |fixes: usize| fixes >= 2 && fixes >= 2 * self.fixes_at_resolve.max(1);
+        let by_gps = due(state.model.fixes.len()) && due(state.usable_fixes());
+        by_count || by_fill || by_gps
+    }
+
+    /// Whether a refresh is due (with the background thread free).
+    pub fn refresh_due(&self, config: &EngineConfig) -> bool {
+        let every = config.refresh_every_edges;
+        config.background && every > 0 && self.edges_since_refresh >= every
+    }
+
+    /// A re-solve ([`Polish::Full`]) or a refresh ([`Polish::None`])
+    /// starts from `state`.
+    pub fn started(&mut self, polish: Polish, state: &State) {
+        self.edges_since_refresh = 0;
+        if polish != Polish::None {
+            self.polished(state);
+        }
+    }
+
+    /// A polished state was built inline from `state`: the re-solve
+    /// schedule restarts.
+    pub fn polished(&mut self, state: &State) {
+        self.edges_since_resolve = 0;
+        self.fixes_at_resolve = state.usable_fixes();
+    }
+
+    /// `state`, fresh from a re-solve or refresh, is current: the fill
+    /// baseline is its factor.
+    pub fn fresh(&mut self, state: &State) {
+        self.nnz_after_resolve = state.factor_nnz();
+    }
+}
