@@ -1,5 +1,5 @@
-//! Batch solve time per dataset and formulation (issue 2's targets:
-//! City10000 two-stage ≤ 50 ms, with polish ≤ 300 ms on 2 cores).
+//! Batch solve time per dataset and formulation (targets on 2 cores:
+//! City10000 two-stage ≤ 50 ms, with polish ≤ 300 ms).
 //!
 //! `cargo bench -p slamd-benches --bench linear_solve`
 

@@ -6,10 +6,11 @@
                                 [--kinds random local random-grouped local-grouped]
                                 [--counts 100 1000 4000] [--gnc --gnc-timeout 600]
 
-Paper B's protocol, extended (ALGORITHM.md §3). ../shared/tools/add_outliers.py
-injects Vertigo-style loop closures (seed --seed); `slamd replay --embedded`
-streams the spoiled file in time order (max(i, j)), one snapshot per
-keyframe, the filter on with its defaults. Per run:
+Paper B's protocol, extended (docs/design.md, "Robust kernels and
+switches"). ../shared/tools/add_outliers.py injects Vertigo-style loop
+closures (seed --seed); `slamd replay --embedded` streams the spoiled file
+in time order (max(i, j)), one snapshot per keyframe, the filter on with
+its defaults. Per run:
 
 - precision / recall of the injected edges (an edge counts as caught when
   its final switch is < 0.5; `rejected_edges` in slamd's JSON);

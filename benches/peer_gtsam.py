@@ -7,10 +7,11 @@
 
 Both results are scored by `slamd eval` (g2o's χ², ATE after rigid
 alignment), so the figures are comparable. GTSAM gets the same graph slamd
-solves (newer-id-first edges inverted, information kept, ALGORITHM.md §4)
-and starts from the file's own initial guess, as a GTSAM user would; slamd
-starts from nothing (two-stage linear solve, then its polish). Times
-exclude file I/O on both sides; each figure is the best of --repeat runs.
+solves (newer-id-first edges inverted, information kept; docs/design.md,
+"Scoring: χ² and ATE") and starts from the file's own initial guess, as a
+GTSAM user would; slamd starts from nothing (two-stage linear solve, then
+its polish). Times exclude file I/O on both sides; each figure is the best
+of --repeat runs.
 """
 import argparse, json, math, os, subprocess, sys, tempfile, time
 

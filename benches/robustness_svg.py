@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""The README's robustness picture: City10000 with 1000 random wrong loop
+"""The picture in docs/robustness.md: City10000 with 1000 random wrong loop
 closures, without and with the filter, side by side.
 
     cargo build --release --bin slamd

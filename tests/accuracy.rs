@@ -1,5 +1,5 @@
 //! χ² and ATE on the shared datasets against the known optima
-//! (ALGORITHM.md §4, issue 2's targets).
+//! (docs/design.md, "Scoring: χ² and ATE").
 
 use slamd::eval::ate;
 use slamd::io::read_ground_truth;

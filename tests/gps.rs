@@ -1,5 +1,5 @@
 //! GPS fixes: georeferenced poses from exact fixes, online and in batch,
-//! and refusals of bad fixes (issue 5).
+//! and refusals of bad fixes.
 
 use crate::daemon::Daemon;
 use faer::c64;

@@ -1,5 +1,5 @@
 //! The outlier filter: wrong loop closures switched off online and in
-//! batch, and a wrongly rejected one restored (issue 6).
+//! batch, and a wrongly rejected one restored.
 
 use slamd::engine::{EdgeInput, Engine, EngineConfig};
 use slamd::eval::ate;

@@ -5,11 +5,9 @@
 //! the daemon can keep its latency-critical threads, and the frontends that
 //! share its core, together ([`reserve_current_thread`]). Background work
 //! (re-solves, freeing retired factors) then runs on the other cores
-//! ([`run_in_background`]). Sharing the pinned core, a re-solve's build
-//! or a factor's free time-sliced with the engine thread: with `ipc.cpu =
-//! 0` and the replaying frontend on core 0, Manhattan took 1.50-1.74 s
-//! (p99 3.9-4.0 ms) through the daemon against 0.99-1.24 s (0.80-0.88 ms)
-//! with the re-solves moved off, City10000 11.2-12.5 s against 5.0-5.5 s.
+//! ([`run_in_background`]): sharing the pinned core, a re-solve's build or
+//! a factor's free would time-slice with the engine thread
+//! (docs/daemon.md, "Latency").
 
 use std::sync::atomic::{AtomicU64, Ordering};
 

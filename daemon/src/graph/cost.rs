@@ -2,7 +2,7 @@
 //!
 //! Written out: `e_t = R(θ_ij)ᵀ (R_iᵀ (p_j − p_i) − t_ij)` and
 //! `e_θ = wrap(θ_j − θ_i − θ_ij)`. This is the figure every table in slamd
-//! reports, relative to the optimum of the same file (ALGORITHM.md §4).
+//! reports, relative to the optimum of the same file (docs/design.md, "Scoring: χ² and ATE").
 
 use super::{Edge, PoseGraph};
 use crate::geometry::{wrap_angle, Pose2};
