@@ -2,46 +2,17 @@
 //! blocks on the WaitSet) and [`Outlet`] (publishes snapshots, switches and
 //! rejections).
 
-use super::{classify, node, protocol_attributes, service_name, shm, TransportError};
+use super::services::{self, Access, Event, Namespace, Topic};
+use super::{node, shm, TransportError};
 use crate::message::{Edge, GpsFix, Keyframe, Pose, Rejection, SnapshotHeader, Switch, SwitchesHeader};
-use crate::service::{Qos, ServiceNames};
+use crate::service::Qos;
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
-use iceoryx2::service::port_factory::{event, publish_subscribe};
 use iceoryx2::waitset::WaitSetRunResult;
 use std::time::Duration;
-
-/// Samples a subscriber of the latest-value topics (poses, switches) may
-/// hold at once: one kept by the caller (the last snapshot), the newest
-/// inside `Snapshots::latest`, and the one it is receiving. With 2 a
-/// replay that kept its last snapshot failed with `ExceedsMaxBorrows`
-/// whenever two snapshots arrived between calls.
-const MAX_BORROWED: usize = 3;
-
-/// Opens or creates a frontend → daemon topic of `T` named `name`: up to
-/// `max_frontends` publishers, the daemon's subscriber and one spare, a
-/// queue of `buffer` samples, no history, and no safe overflow (a full
-/// queue never overwrites input).
-fn input_topic<T: std::fmt::Debug + ZeroCopySend>(
-    node: &Node<ipc::Service>,
-    namespace: &str,
-    name: &str,
-    max_frontends: usize,
-    buffer: usize,
-) -> Result<publish_subscribe::PortFactory<ipc::Service, T, ()>, TransportError> {
-    node.service_builder(&service_name(name)?)
-        .publish_subscribe::<T>()
-        .max_publishers(max_frontends)
-        .max_subscribers(2)
-        .subscriber_max_buffer_size(buffer)
-        .history_size(0)
-        .enable_safe_overflow(false)
-        .open_or_create_with_attributes(&protocol_attributes())
-        .map_err(|e| classify("create", namespace, name, &e))
-}
 
 /// One message from a frontend.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -87,90 +58,47 @@ pub struct Ingress {
 
 /// Keeps every service open for the daemon's lifetime.
 struct Services {
-    _keyframes: publish_subscribe::PortFactory<ipc::Service, Keyframe, ()>,
-    _edges: publish_subscribe::PortFactory<ipc::Service, Edge, ()>,
-    _gps: publish_subscribe::PortFactory<ipc::Service, GpsFix, ()>,
-    _poses: publish_subscribe::PortFactory<ipc::Service, [Pose], SnapshotHeader>,
-    _rejections: publish_subscribe::PortFactory<ipc::Service, Rejection, ()>,
-    _switches: publish_subscribe::PortFactory<ipc::Service, [Switch], SwitchesHeader>,
-    _ingest: event::PortFactory<ipc::Service>,
-    _published: event::PortFactory<ipc::Service>,
+    _keyframes: Topic<Keyframe>,
+    _edges: Topic<Edge>,
+    _gps: Topic<GpsFix>,
+    _poses: Topic<[Pose], SnapshotHeader>,
+    _rejections: Topic<Rejection>,
+    _switches: Topic<[Switch], SwitchesHeader>,
+    _ingest: Event,
+    _published: Event,
 }
 
 impl Ingress {
     /// Checks `/dev/shm`, cleans up after dead processes, creates every
-    /// service of `namespace` (or opens it after a restart) and subscribes.
+    /// service of `namespace` with `qos` (or opens it after a restart, if
+    /// it offers at least those sizes) and subscribes.
     pub fn create(namespace: &str, qos: &Qos) -> Result<Self, TransportError> {
         shm::check_room(qos.shared_memory_bytes())?;
-        let names = ServiceNames::new(namespace);
+        let ns = Namespace::new(namespace);
         let node = node("slamd-daemon", true)?;
         let cleaned = node.try_cleanup_dead_nodes().cleanups;
-        let attrs = protocol_attributes();
-        let frontends = qos.max_frontends;
-        let keyframes =
-            input_topic::<Keyframe>(&node, namespace, &names.keyframes, frontends, qos.keyframe_buffer)?;
-        let edges = input_topic::<Edge>(&node, namespace, &names.edges, frontends, qos.edge_buffer)?;
-        let gps = input_topic::<GpsFix>(&node, namespace, &names.gps, frontends, qos.gps_buffer)?;
-        let poses = node
-            .service_builder(&service_name(&names.poses)?)
-            .publish_subscribe::<[Pose]>()
-            .user_header::<SnapshotHeader>()
-            .max_publishers(1)
-            .max_subscribers(qos.max_subscribers)
-            .subscriber_max_buffer_size(1)
-            .subscriber_max_borrowed_samples(MAX_BORROWED)
-            .history_size(1)
-            .enable_safe_overflow(true)
-            .open_or_create_with_attributes(&attrs)
-            .map_err(|e| classify("create", namespace, &names.poses, &e))?;
-        let rejections = node
-            .service_builder(&service_name(&names.rejections)?)
-            .publish_subscribe::<Rejection>()
-            .max_publishers(1)
-            .max_subscribers(qos.max_subscribers)
-            .subscriber_max_buffer_size(64)
-            .history_size(qos.rejection_history)
-            .enable_safe_overflow(true)
-            .open_or_create_with_attributes(&attrs)
-            .map_err(|e| classify("create", namespace, &names.rejections, &e))?;
-        let switches = node
-            .service_builder(&service_name(&names.switches)?)
-            .publish_subscribe::<[Switch]>()
-            .user_header::<SwitchesHeader>()
-            .max_publishers(1)
-            .max_subscribers(qos.max_subscribers)
-            .subscriber_max_buffer_size(1)
-            .subscriber_max_borrowed_samples(MAX_BORROWED)
-            .history_size(1)
-            .enable_safe_overflow(true)
-            .open_or_create_with_attributes(&attrs)
-            .map_err(|e| classify("create", namespace, &names.switches, &e))?;
-        let ingest = node
-            .service_builder(&service_name(&names.ingest)?)
-            .event()
-            .max_notifiers(qos.max_frontends)
-            .max_listeners(2)
-            .open_or_create_with_attributes(&attrs)
-            .map_err(|e| classify("create", namespace, &names.ingest, &e))?;
-        let published = node
-            .service_builder(&service_name(&names.published)?)
-            .event()
-            .max_notifiers(2)
-            .max_listeners(qos.max_subscribers)
-            .open_or_create_with_attributes(&attrs)
-            .map_err(|e| classify("create", namespace, &names.published, &e))?;
+        let access = Access::Create(qos);
+        let keyframes = services::keyframes(&node, &ns, access)?;
+        let edges = services::edges(&node, &ns, access)?;
+        let gps = services::gps(&node, &ns, access)?;
+        let poses = services::poses(&node, &ns, access)?;
+        let rejections = services::rejections(&node, &ns, access)?;
+        let switches = services::switches(&node, &ns, access)?;
+        let ingest = services::ingest(&node, &ns, access)?;
+        let published = services::published(&node, &ns, access)?;
+        let names = &ns.services;
         let kf_sub = keyframes
             .subscriber_builder()
             .create()
-            .map_err(|e| classify("subscribe to", namespace, &names.keyframes, &e))?;
+            .map_err(|e| ns.fail("subscribe to", &names.keyframes, &e))?;
         let edge_sub = edges
             .subscriber_builder()
             .create()
-            .map_err(|e| classify("subscribe to", namespace, &names.edges, &e))?;
+            .map_err(|e| ns.fail("subscribe to", &names.edges, &e))?;
         let gps_sub = gps
             .subscriber_builder()
             .create()
-            .map_err(|e| classify("subscribe to", namespace, &names.gps, &e))?;
+            .map_err(|e| ns.fail("subscribe to", &names.gps, &e))?;
         let listener = ingest
             .listener_builder()
             .create()
@@ -285,49 +213,33 @@ pub struct Outlet {
 }
 
 impl Outlet {
-    /// Opens the output services an [`Ingress`] created.
-    pub fn open(namespace: &str, qos: &crate::service::Qos) -> Result<Self, TransportError> {
-        let names = ServiceNames::new(namespace);
+    /// Opens the output services an [`Ingress`] created. The snapshot and
+    /// switches publishers first reserve `qos.initial_poses` elements (at
+    /// least 1) and grow by powers of two.
+    pub fn open(namespace: &str, qos: &Qos) -> Result<Self, TransportError> {
+        let ns = Namespace::new(namespace);
+        let names = &ns.services;
         let node = node("slamd-daemon-outlet", false)?;
-        let attrs = protocol_attributes();
-        let poses = node
-            .service_builder(&service_name(&names.poses)?)
-            .publish_subscribe::<[Pose]>()
-            .user_header::<SnapshotHeader>()
-            .open_with_attributes(&attrs)
-            .map_err(|e| classify("open", namespace, &names.poses, &e))?
+        let poses = services::poses(&node, &ns, Access::Open)?
             .publisher_builder()
             .initial_max_slice_len(qos.initial_poses.max(1))
             .allocation_strategy(AllocationStrategy::PowerOfTwo)
             .create()
-            .map_err(|e| classify("open", namespace, &names.poses, &e))?;
-        let rejections = node
-            .service_builder(&service_name(&names.rejections)?)
-            .publish_subscribe::<Rejection>()
-            .open_with_attributes(&attrs)
-            .map_err(|e| classify("open", namespace, &names.rejections, &e))?
+            .map_err(|e| ns.fail("open", &names.poses, &e))?;
+        let rejections = services::rejections(&node, &ns, Access::Open)?
             .publisher_builder()
             .create()
-            .map_err(|e| classify("open", namespace, &names.rejections, &e))?;
-        let switches = node
-            .service_builder(&service_name(&names.switches)?)
-            .publish_subscribe::<[Switch]>()
-            .user_header::<SwitchesHeader>()
-            .open_with_attributes(&attrs)
-            .map_err(|e| classify("open", namespace, &names.switches, &e))?
+            .map_err(|e| ns.fail("open", &names.rejections, &e))?;
+        let switches = services::switches(&node, &ns, Access::Open)?
             .publisher_builder()
             .initial_max_slice_len(qos.initial_poses.max(1))
             .allocation_strategy(AllocationStrategy::PowerOfTwo)
             .create()
-            .map_err(|e| classify("open", namespace, &names.switches, &e))?;
-        let published = node
-            .service_builder(&service_name(&names.published)?)
-            .event()
-            .open_with_attributes(&attrs)
-            .map_err(|e| classify("open", namespace, &names.published, &e))?
+            .map_err(|e| ns.fail("open", &names.switches, &e))?;
+        let published = services::published(&node, &ns, Access::Open)?
             .notifier_builder()
             .create()
-            .map_err(|e| classify("open", namespace, &names.published, &e))?;
+            .map_err(|e| ns.fail("open", &names.published, &e))?;
         Ok(Self {
             _node: node,
             poses,

@@ -44,6 +44,8 @@ pub enum TransportError {
 }
 
 impl TransportError {
+    /// [`TransportError::Other`]: `operation` as given, `cause` as its
+    /// `Debug` text.
     pub(crate) fn other(operation: &str, cause: impl fmt::Debug) -> Self {
         TransportError::Other {
             operation: operation.to_string(),

@@ -1,8 +1,8 @@
 //! [`FrontendLink`]: a frontend's publishers into the daemon.
 
-use super::{classify, node, protocol_attributes, service_name, TransportError};
+use super::services::{self, Access, Namespace};
+use super::{node, TransportError};
 use crate::message::{Edge, GpsFix, Keyframe};
-use crate::service::ServiceNames;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::{BackpressureAction, BackpressureInfo};
@@ -13,7 +13,7 @@ use std::time::Duration;
 /// daemon. Opening never creates a service: no daemon, no link.
 pub struct FrontendLink {
     _node: Node<ipc::Service>,
-    names: ServiceNames,
+    ns: Namespace,
     keyframes: Publisher<ipc::Service, Keyframe, ()>,
     edges: Publisher<ipc::Service, Edge, ()>,
     gps: Publisher<ipc::Service, GpsFix, ()>,
@@ -22,11 +22,12 @@ pub struct FrontendLink {
 
 impl FrontendLink {
     /// Opens the daemon's input services under `namespace`. A send that
-    /// finds the daemon's queue full retries for `backpressure`, then fails.
+    /// finds the daemon's queue full retries for `backpressure`, then fails
+    /// with [`TransportError::Backpressure`].
     pub fn open(namespace: &str, backpressure: Duration) -> Result<Self, TransportError> {
-        let names = ServiceNames::new(namespace);
+        let ns = Namespace::new(namespace);
+        let names = &ns.services;
         let node = node("slamd-frontend", false)?;
-        let attrs = protocol_attributes();
         let handler = move |info: &BackpressureInfo| {
             if info.elapsed_time < backpressure {
                 BackpressureAction::Retry
@@ -34,44 +35,28 @@ impl FrontendLink {
                 BackpressureAction::DiscardDataAndFail
             }
         };
-        let keyframes = node
-            .service_builder(&service_name(&names.keyframes)?)
-            .publish_subscribe::<Keyframe>()
-            .open_with_attributes(&attrs)
-            .map_err(|e| classify("open", namespace, &names.keyframes, &e))?
+        let keyframes = services::keyframes(&node, &ns, Access::Open)?
             .publisher_builder()
             .set_backpressure_handler(handler)
             .create()
-            .map_err(|e| classify("open", namespace, &names.keyframes, &e))?;
-        let edges = node
-            .service_builder(&service_name(&names.edges)?)
-            .publish_subscribe::<Edge>()
-            .open_with_attributes(&attrs)
-            .map_err(|e| classify("open", namespace, &names.edges, &e))?
+            .map_err(|e| ns.fail("open", &names.keyframes, &e))?;
+        let edges = services::edges(&node, &ns, Access::Open)?
             .publisher_builder()
             .set_backpressure_handler(handler)
             .create()
-            .map_err(|e| classify("open", namespace, &names.edges, &e))?;
-        let gps = node
-            .service_builder(&service_name(&names.gps)?)
-            .publish_subscribe::<GpsFix>()
-            .open_with_attributes(&attrs)
-            .map_err(|e| classify("open", namespace, &names.gps, &e))?
+            .map_err(|e| ns.fail("open", &names.edges, &e))?;
+        let gps = services::gps(&node, &ns, Access::Open)?
             .publisher_builder()
             .set_backpressure_handler(handler)
             .create()
-            .map_err(|e| classify("open", namespace, &names.gps, &e))?;
-        let ingest = node
-            .service_builder(&service_name(&names.ingest)?)
-            .event()
-            .open_with_attributes(&attrs)
-            .map_err(|e| classify("open", namespace, &names.ingest, &e))?
+            .map_err(|e| ns.fail("open", &names.gps, &e))?;
+        let ingest = services::ingest(&node, &ns, Access::Open)?
             .notifier_builder()
             .create()
-            .map_err(|e| classify("open", namespace, &names.ingest, &e))?;
+            .map_err(|e| ns.fail("open", &names.ingest, &e))?;
         Ok(Self {
             _node: node,
-            names,
+            ns,
             keyframes,
             edges,
             gps,
@@ -84,7 +69,7 @@ impl FrontendLink {
         self.keyframes
             .send_copy(m)
             .map(|_| ())
-            .map_err(|e| self.send_err(&self.names.keyframes, e))
+            .map_err(|e| self.ns.fail("send on", &self.ns.services.keyframes, &e))
     }
 
     /// Publishes an edge.
@@ -92,7 +77,7 @@ impl FrontendLink {
         self.edges
             .send_copy(m)
             .map(|_| ())
-            .map_err(|e| self.send_err(&self.names.edges, e))
+            .map_err(|e| self.ns.fail("send on", &self.ns.services.edges, &e))
     }
 
     /// Publishes a GPS fix.
@@ -100,7 +85,7 @@ impl FrontendLink {
         self.gps
             .send_copy(m)
             .map(|_| ())
-            .map_err(|e| self.send_err(&self.names.gps, e))
+            .map_err(|e| self.ns.fail("send on", &self.ns.services.gps, &e))
     }
 
     /// Wakes the daemon to take what was published.
@@ -109,16 +94,5 @@ impl FrontendLink {
             .notify()
             .map(|_| ())
             .map_err(|e| TransportError::other("notify the daemon", e))
-    }
-
-    fn send_err(&self, service: &str, e: impl std::fmt::Debug) -> TransportError {
-        let text = format!("{e:?}");
-        if text.contains("UnableToDeliver") {
-            TransportError::Backpressure {
-                service: service.into(),
-            }
-        } else {
-            TransportError::other(&format!("send on `{service}`"), e)
-        }
     }
 }

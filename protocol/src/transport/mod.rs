@@ -9,10 +9,16 @@
 //! - [`FrontendLink`]: what a frontend publishes with. It only opens
 //!   services, so a missing daemon is a clear error, not a silent creation.
 //! - [`SnapshotLink`]: what a frontend or monitor reads snapshots with.
+//!
+//! Every role reaches a service through the one builder for it in
+//! `services` (the daemon creates, everyone else opens), and every
+//! iceoryx2 failure is worded by its error type in `classify`.
 
+mod classify;
 mod daemon;
 mod error;
 mod frontend;
+mod services;
 pub mod shm;
 mod snapshots;
 
@@ -56,31 +62,6 @@ pub(crate) fn node(name: &str, handle_signals: bool) -> Result<Node<ipc::Service
 /// Parses a service name.
 pub(crate) fn service_name(name: &str) -> Result<ServiceName, TransportError> {
     ServiceName::new(name).map_err(|e| TransportError::other(&format!("service name `{name}`"), e))
-}
-
-/// Turns an iceoryx2 open or create failure into what the user should hear.
-pub(crate) fn classify(
-    operation: &str,
-    namespace: &str,
-    service: &str,
-    e: &dyn std::fmt::Debug,
-) -> TransportError {
-    let text = format!("{e:?}");
-    if text.contains("DoesNotExist") {
-        TransportError::NoDaemon {
-            namespace: namespace.into(),
-        }
-    } else if text.contains("IncompatibleAttributes") {
-        TransportError::ProtocolMismatch {
-            service: service.into(),
-        }
-    } else if text.contains("IncompatibleTypes") {
-        TransportError::IncompatibleLayout {
-            service: service.into(),
-        }
-    } else {
-        TransportError::other(&format!("{operation} `{service}`"), e)
-    }
 }
 
 /// Lowers iceoryx2's own log output to errors: at start it warns that no

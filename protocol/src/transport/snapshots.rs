@@ -1,8 +1,8 @@
 //! [`SnapshotLink`]: reading the daemon's snapshots, switches and rejections.
 
-use super::{classify, node, protocol_attributes, service_name, TransportError};
+use super::services::{self, Access, Namespace};
+use super::{node, TransportError};
 use crate::message::{Pose, Rejection, SnapshotHeader, Switch, SwitchesHeader};
-use crate::service::ServiceNames;
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
@@ -52,43 +52,25 @@ pub struct SnapshotLink {
 impl SnapshotLink {
     /// Opens the daemon's output services under `namespace`.
     pub fn open(namespace: &str) -> Result<Self, TransportError> {
-        let names = ServiceNames::new(namespace);
+        let ns = Namespace::new(namespace);
+        let names = &ns.services;
         let node = node("slamd-snapshots", false)?;
-        let attrs = protocol_attributes();
-        let poses = node
-            .service_builder(&service_name(&names.poses)?)
-            .publish_subscribe::<[Pose]>()
-            .user_header::<SnapshotHeader>()
-            .open_with_attributes(&attrs)
-            .map_err(|e| classify("open", namespace, &names.poses, &e))?
+        let poses = services::poses(&node, &ns, Access::Open)?
             .subscriber_builder()
             .create()
-            .map_err(|e| classify("open", namespace, &names.poses, &e))?;
-        let rejections = node
-            .service_builder(&service_name(&names.rejections)?)
-            .publish_subscribe::<Rejection>()
-            .open_with_attributes(&attrs)
-            .map_err(|e| classify("open", namespace, &names.rejections, &e))?
+            .map_err(|e| ns.fail("open", &names.poses, &e))?;
+        let rejections = services::rejections(&node, &ns, Access::Open)?
             .subscriber_builder()
             .create()
-            .map_err(|e| classify("open", namespace, &names.rejections, &e))?;
-        let switches = node
-            .service_builder(&service_name(&names.switches)?)
-            .publish_subscribe::<[Switch]>()
-            .user_header::<SwitchesHeader>()
-            .open_with_attributes(&attrs)
-            .map_err(|e| classify("open", namespace, &names.switches, &e))?
+            .map_err(|e| ns.fail("open", &names.rejections, &e))?;
+        let switches = services::switches(&node, &ns, Access::Open)?
             .subscriber_builder()
             .create()
-            .map_err(|e| classify("open", namespace, &names.switches, &e))?;
-        let published = node
-            .service_builder(&service_name(&names.published)?)
-            .event()
-            .open_with_attributes(&attrs)
-            .map_err(|e| classify("open", namespace, &names.published, &e))?
+            .map_err(|e| ns.fail("open", &names.switches, &e))?;
+        let published = services::published(&node, &ns, Access::Open)?
             .listener_builder()
             .create()
-            .map_err(|e| classify("open", namespace, &names.published, &e))?;
+            .map_err(|e| ns.fail("open", &names.published, &e))?;
         Ok(Self {
             _node: node,
             poses,
