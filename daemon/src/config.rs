@@ -337,12 +337,12 @@ mod tests {
             "configuration: ipc.edge_buffer must be at least 1"
         );
         let mut c = Config::default();
-        c.engine.outliers.kernel = crate::outliers::Kernel::Dcs { phi: 0.0 };
+        c.engine.outliers.kernel = crate::robust::Kernel::Dcs { phi: 0.0 };
         assert_eq!(
             c.validate().unwrap_err().to_string(),
             "configuration: engine.outliers: the kernel's parameter 0 must be a number > 0"
         );
-        c.engine.outliers.kernel = crate::outliers::Kernel::Sc { xi: f64::NAN };
+        c.engine.outliers.kernel = crate::robust::Kernel::Sc { xi: f64::NAN };
         assert!(c
             .validate()
             .unwrap_err()

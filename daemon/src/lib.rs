@@ -12,8 +12,9 @@
 //! information, the cost) → [`linear`] (initialisers without a guess: the
 //! two-stage formulation and paper A's virtual frames) → [`sparse`] (normal
 //! equations and faer's sparse Cholesky) → [`nonlinear`] (the
-//! Levenberg–Marquardt polish); [`gps`] adds fixes and georeferencing,
-//! [`outliers`] switches wrong loop closures off.
+//! Levenberg–Marquardt polish, its switched edges weighed by a [`robust`]
+//! kernel); [`gps`] adds fixes and georeferencing, [`outliers`] switches
+//! wrong loop closures off.
 //! [`solver`] chains them into a batch solve and
 //! [`eval`] measures the result.
 //!
@@ -62,6 +63,7 @@ pub mod ipc;
 pub mod linear;
 pub mod nonlinear;
 pub mod outliers;
+pub mod robust;
 pub mod solver;
 pub mod sparse;
 pub mod synthetic;

@@ -14,7 +14,7 @@ use std::time::Instant;
 /// How the initial (linear) solution is computed.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Formulation {
-    /// Axes, then positions (ALGORITHM.md §2). The default.
+    /// Axes, then positions (docs/design.md, "Formulations"). The default.
     #[default]
     TwoStage,
     /// Paper A as printed: virtual frames, pivot on the neighbour.
@@ -194,13 +194,14 @@ pub fn solve_batch(graph: &PoseGraph, options: &BatchOptions) -> Result<BatchSol
                     ..*e
                 })
                 .collect();
-            for _ in 0..2 {
-                let Some(g) = gps.fit(&poses) else {
-                    break;
-                };
-                let priors = gps.priors(&g);
-                poses = polish(Problem::new(&edges, &priors), poses, options.lm)?.poses;
-                georef = gps.fit(&poses);
+            // georeferenced afresh on the switched edges; the linear
+            // solution's georeference stands when no round runs
+            let mut fitted = None;
+            if gps
+                .georeference(&edges, &mut poses, &mut fitted, options.lm, 2)?
+                .is_some()
+            {
+                georef = fitted;
             }
         }
         switches = Some(sol.switches);
@@ -209,16 +210,10 @@ pub fn solve_batch(graph: &PoseGraph, options: &BatchOptions) -> Result<BatchSol
         let start = Instant::now();
         let mut report = polish(Problem::edges(graph.edges()), poses.clone(), options.lm)?;
         if let Some(gps) = gps.filter(|g| g.absolute) {
-            // alternate: fit the georeference, polish with the fixes as
-            // priors in its map frame, refit
-            for _ in 0..2 {
-                let Some(g) = georef.or_else(|| gps.fit(&report.poses)) else {
-                    break;
-                };
-                let priors = gps.priors(&g);
-                let problem = Problem::new(graph.edges(), &priors);
-                report = polish(problem, report.poses.clone(), options.lm)?;
-                georef = gps.fit(&report.poses);
+            // the first round polishes under the linear solution's georeference
+            let mut poses = report.poses.clone();
+            if let Some(last) = gps.georeference(graph.edges(), &mut poses, &mut georef, options.lm, 2)? {
+                report = last;
             }
         }
         let secs = start.elapsed().as_secs_f64();

@@ -9,7 +9,7 @@ use crate::geometry::Pose2;
 use crate::gps::{variance_factor, Georef, GpsConfig, GpsFix, GpsInput};
 use crate::graph::{chi2_of_edges, Edge, PoseGraph};
 use crate::linear::two_stage;
-use crate::nonlinear::{polish, LevenbergMarquardtParams, PositionPrior, Problem};
+use crate::nonlinear::{LevenbergMarquardtParams, PositionPrior};
 use crate::outliers::{robust_polish, OFF_BELOW, REJECTED_BELOW};
 use std::collections::HashMap;
 use std::sync::atomic::AtomicBool;
@@ -245,16 +245,11 @@ impl Model {
         if config.calibrate {
             input.weight = variance_factor(chi2_of_edges(edges, poses), edges.len(), poses.len());
         }
-        for _ in 0..2 {
-            let Some(g) = input.fit(poses) else {
-                return;
-            };
-            let priors = input.priors(&g);
-            if let Ok(r) = polish(Problem::new(edges, &priors), poses.clone(), *params) {
-                *poses = r.poses;
-            }
-        }
-        if let Some(g) = input.fit(poses) {
+        // a polish that fails ends the rounds with the fit it started from:
+        // repeating it from the same poses would fail the same way
+        let mut georef = None;
+        let _ = input.georeference(edges, poses, &mut georef, *params, 2);
+        if let Some(g) = georef {
             self.georef = Some(g);
             self.gps_weight = input.weight;
         }

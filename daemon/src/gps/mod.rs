@@ -20,7 +20,9 @@ pub use slamd_types::{check_covariance, GpsError};
 pub use triangles::{Triangle, TriangleParams};
 
 use crate::geometry::Pose2;
-use crate::nonlinear::PositionPrior;
+use crate::graph::Edge;
+use crate::nonlinear::{polish, LevenbergMarquardtParams, LmReport, PositionPrior, Problem};
+use crate::sparse::FactorError;
 use faer::c64;
 use nalgebra::Matrix2;
 
@@ -127,6 +129,45 @@ impl GpsInput {
     /// Each fix as a position prior in the map frame of `georef`.
     pub fn priors(&self, georef: &Georef) -> Vec<PositionPrior> {
         self.fixes.iter().map(|f| f.prior(georef, self.weight)).collect()
+    }
+
+    /// Georeferences `poses` by alternation, `rounds` times: take the
+    /// map→ENU motion `g` ([`Self::fit`] to the poses), polish the poses on
+    ///
+    /// ```text
+    /// Σ_edges e_ijᵀ Ω_ij e_ij + Σ_fixes (p_k − g⁻¹(enu_k))ᵀ Ω_k (p_k − g⁻¹(enu_k))
+    /// ```
+    ///
+    /// (each fix a prior in the map frame, [`Self::priors`]), and refit `g`
+    /// to the polished poses.
+    ///
+    /// `georef` goes in as the `g` of the first round (`None`: fitted to
+    /// `poses`) and comes out as the fit to the poses as left. A fit that
+    /// fails (fewer than two distinct positions) ends the rounds; when the
+    /// first one fails nothing changes. On a polish error, `poses` and
+    /// `georef` are those the failing round started from. Returns the
+    /// report of the last polish, `None` when no round ran.
+    pub fn georeference(
+        &self,
+        edges: &[Edge],
+        poses: &mut Vec<Pose2>,
+        georef: &mut Option<Georef>,
+        params: LevenbergMarquardtParams,
+        rounds: usize,
+    ) -> Result<Option<LmReport>, FactorError> {
+        let mut last = None;
+        for _ in 0..rounds {
+            let Some(g) = georef.or_else(|| self.fit(poses)) else {
+                break;
+            };
+            *georef = Some(g);
+            let priors = self.priors(&g);
+            let report = polish(Problem::new(edges, &priors), poses.clone(), params)?;
+            poses.clone_from(&report.poses);
+            *georef = self.fit(poses);
+            last = Some(report);
+        }
+        Ok(last)
     }
 }
 

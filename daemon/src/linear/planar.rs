@@ -8,25 +8,19 @@
 //! is anisotropic: a scalar weight cannot express it (on Carlone's Intel a
 //! scalar weight gives χ² = 2.2·10⁷, the full weight 221).
 
-use super::system::Var;
+use super::system::{Row, Var};
 use crate::sparse::{FactorError, Ordering, SparseCholesky, UpperCsc};
 use faer::c64;
 use nalgebra::{Matrix2, Vector2};
 
-#[derive(Clone, Copy, Debug)]
-struct Row {
-    cols: [usize; 3],
-    coefs: [c64; 3],
-    len: usize,
-    rhs: c64,
-    weight: Matrix2<f64>,
-}
+/// Most free terms a planar row holds.
+const PLANAR_TERMS: usize = 3;
 
 /// Weighted planar rows over `n` unknown points.
 #[derive(Clone, Debug)]
 pub struct PlanarSystem {
     n: usize,
-    rows: Vec<Row>,
+    rows: Vec<Row<c64, Matrix2<f64>, PLANAR_TERMS>>,
 }
 
 fn block(c: c64) -> Matrix2<f64> {
@@ -50,28 +44,10 @@ impl PlanarSystem {
     }
 
     /// Adds `Σ c·var = rhs` with weight matrix `weight` (SPD, in the frame
-    /// of the residual); fixed variables move to the right side.
+    /// of the residual); fixed variables move to the right side. At most
+    /// three free terms.
     pub fn push(&mut self, terms: &[(Var, c64)], rhs: c64, weight: Matrix2<f64>) {
-        let mut row = Row {
-            cols: [0; 3],
-            coefs: [c64::new(0.0, 0.0); 3],
-            len: 0,
-            rhs,
-            weight,
-        };
-        for &(var, coef) in terms {
-            match var {
-                Var::Free(i) => {
-                    row.cols[row.len] = i;
-                    row.coefs[row.len] = coef;
-                    row.len += 1;
-                }
-                Var::Fixed(v) => row.rhs -= coef * v,
-            }
-        }
-        if row.len > 0 {
-            self.rows.push(row);
-        }
+        self.rows.extend(Row::new(terms, rhs, weight));
     }
 
     /// The real normal equations over `2n` unknowns `[x_0, y_0, x_1, …]`.

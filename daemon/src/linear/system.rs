@@ -23,21 +23,55 @@ pub enum Var {
 /// points has six).
 pub const MAX_TERMS: usize = 6;
 
-/// One weighted row with at most [`MAX_TERMS`] terms.
+/// One weighted row `Σ_k coefs[k] · x[cols[k]] = rhs` with at most `N`
+/// free terms, of weight `W`: an inverse variance here, a 2×2 SPD matrix in
+/// [`super::planar`].
 #[derive(Clone, Copy, Debug)]
-struct Row<T> {
-    cols: [usize; MAX_TERMS],
-    coefs: [T; MAX_TERMS],
-    len: usize,
-    rhs: c64,
-    weight: f64,
+pub(super) struct Row<T, W, const N: usize> {
+    pub(super) cols: [usize; N],
+    pub(super) coefs: [T; N],
+    pub(super) len: usize,
+    pub(super) rhs: c64,
+    pub(super) weight: W,
+}
+
+impl<T: Scalar, W, const N: usize> Row<T, W, N> {
+    /// The row `Σ coef·var = rhs` with the fixed variables moved to the
+    /// right side, or `None` when no term is free. At most `N` free terms.
+    pub(super) fn new(terms: &[(Var, T)], rhs: c64, weight: W) -> Option<Self> {
+        let mut row = Row {
+            cols: [0; N],
+            coefs: [T::default(); N],
+            len: 0,
+            rhs,
+            weight,
+        };
+        for &(var, coef) in terms {
+            match var {
+                Var::Free(i) => {
+                    row.cols[row.len] = i;
+                    row.coefs[row.len] = coef;
+                    row.len += 1;
+                }
+                Var::Fixed(v) => row.rhs -= coef.to_c64() * v,
+            }
+        }
+        (row.len > 0).then_some(row)
+    }
+
+    /// The left side `Σ_k c_k x_k` at `x`.
+    pub(super) fn lhs(&self, x: &[c64]) -> c64 {
+        (0..self.len)
+            .map(|k| self.coefs[k].to_c64() * x[self.cols[k]])
+            .sum()
+    }
 }
 
 /// Weighted rows over `n` complex unknowns.
 #[derive(Clone, Debug)]
 pub struct LinearSystem<T> {
     n: usize,
-    rows: Vec<Row<T>>,
+    rows: Vec<Row<T, f64, MAX_TERMS>>,
 }
 
 impl<T: Scalar> LinearSystem<T> {
@@ -64,26 +98,7 @@ impl<T: Scalar> LinearSystem<T> {
     /// Adds `Σ coef·var = rhs` with weight `w`; fixed variables move to the
     /// right side. At most [`MAX_TERMS`] free terms.
     pub fn push(&mut self, terms: &[(Var, T)], rhs: c64, weight: f64) {
-        let mut row = Row {
-            cols: [0; MAX_TERMS],
-            coefs: [T::default(); MAX_TERMS],
-            len: 0,
-            rhs,
-            weight,
-        };
-        for &(var, coef) in terms {
-            match var {
-                Var::Free(i) => {
-                    row.cols[row.len] = i;
-                    row.coefs[row.len] = coef;
-                    row.len += 1;
-                }
-                Var::Fixed(v) => row.rhs -= coef.to_c64() * v,
-            }
-        }
-        if row.len > 0 {
-            self.rows.push(row);
-        }
+        self.rows.extend(Row::new(terms, rhs, weight));
     }
 
     /// Assembles `A = Σ w c̄ cᵀ` (upper triangle) and `b = Σ w c̄ y`.
@@ -111,8 +126,7 @@ impl<T: Scalar> LinearSystem<T> {
     fn row_residual(&self, x: &[c64]) -> Vec<c64> {
         let mut g = vec![c64::new(0.0, 0.0); self.n];
         for r in &self.rows {
-            let lhs: c64 = (0..r.len).map(|k| r.coefs[k].to_c64() * x[r.cols[k]]).sum();
-            let res = (r.rhs - lhs) * r.weight;
+            let res = (r.rhs - r.lhs(x)) * r.weight;
             for k in 0..r.len {
                 g[r.cols[k]] += r.coefs[k].conjugate().to_c64() * res;
             }
@@ -124,10 +138,7 @@ impl<T: Scalar> LinearSystem<T> {
     pub fn cost(&self, x: &[c64]) -> f64 {
         self.rows
             .iter()
-            .map(|r| {
-                let lhs: c64 = (0..r.len).map(|k| r.coefs[k].to_c64() * x[r.cols[k]]).sum();
-                r.weight * (lhs - r.rhs).norm_sqr()
-            })
+            .map(|r| r.weight * (r.lhs(x) - r.rhs).norm_sqr())
             .sum()
     }
 }

@@ -4,7 +4,7 @@
 
 use crate::geometry::Pose2;
 use crate::graph::{chi2_of_edges, edge_chi2, Edge};
-use crate::outliers::Kernel;
+use crate::robust::Kernel;
 use faer::c64;
 use nalgebra::Matrix2;
 use std::sync::atomic::{AtomicBool, Ordering};

@@ -1,8 +1,9 @@
 //! Outlier filtering of loop closures.
 //!
-//! - [`kernel`]: the closed-form switches (paper B's ASC as printed, SC with
-//!   a fixed Ξ, DCS) and their robust costs; the polish minimises those
-//!   costs by reweighting each loop closure with `s²` at every iteration.
+//! - [`crate::robust`]'s kernels give the closed-form switches (paper B's
+//!   ASC as printed, SC with a fixed Ξ, DCS) and their robust costs; the
+//!   polish minimises those costs by reweighting each loop closure with
+//!   `s²` at every iteration.
 //! - [`cycles`]: paper A's cycle-consistency test with IQR fences.
 //!
 //! The engine applies both in its background re-solve: edges the cycle test
@@ -14,18 +15,18 @@
 
 pub mod cycles;
 pub mod drift;
-pub mod kernel;
 mod robust;
 
 pub use cycles::{CycleCheck, CycleParams, Verdict};
 pub use drift::DriftRun;
-pub use kernel::Kernel;
 pub use robust::{
     robust_polish, RobustSolution, ABANDON_RATIO, DORMANT_BELOW, LOOK_ITERATIONS, PROBE_ITERATIONS,
     PRUNE_RATIO,
 };
 
 use crate::graph::{Edge, EdgeKind};
+use crate::robust::kernel::dcs;
+use crate::robust::Kernel;
 
 /// The `[engine.outliers]` settings. The defaults won the benchmark in
 /// `benches/outliers.py` (README, "Robustness").
@@ -60,10 +61,9 @@ pub struct OutlierConfig {
     /// also starts from the two-stage solution without the loop closures
     /// let in on arrival since the last such re-solve. A group of agreeing
     /// wrong ones can enter against a map bent by the ones before it, and
-    /// every other start then ends in their basin. On: Intel + 1000
-    /// local-grouped precision 0.86 → 1.000, recall 0.76 → 0.88; off (the
-    /// default): City10000 and Manhattan, with or without outliers, 8–11%
-    /// faster.
+    /// every other start then ends in their basin. Off by default (8–11%
+    /// faster on City10000 and Manhattan); on, Intel + 1000 local-grouped
+    /// outliers reach precision 1.000 from 0.86.
     pub unadmitted_start: bool,
     /// Run paper A's cycle test before the kernel.
     pub cycles: bool,
@@ -129,7 +129,7 @@ impl OutlierConfig {
         xj: &crate::geometry::Pose2,
     ) -> f64 {
         let e = crate::graph::edge_error(edge, xi, xj);
-        kernel::dcs(edge.information.mahalanobis(&e), self.arrival_phi)
+        dcs(edge.information.mahalanobis(&e), self.arrival_phi)
     }
 
     /// Whether `edge` gets a switch: every edge but odometry, when enabled.

@@ -3,8 +3,8 @@
 
 use clap::Args;
 use slamd::graph::{EdgeKind, PoseGraph};
-use slamd::outliers::kernel::DEFAULT_PHI;
-use slamd::outliers::{Kernel, OutlierConfig, REJECTED_BELOW};
+use slamd::outliers::{OutlierConfig, REJECTED_BELOW};
+use slamd::robust::{Kernel, DEFAULT_PHI};
 
 #[derive(Args, Debug, Clone)]
 pub struct RobustOpts {

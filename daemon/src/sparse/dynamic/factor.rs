@@ -1,5 +1,7 @@
 //! The factor's storage, its construction from faer, and appending.
 
+use super::runs::run_starts;
+use super::scratch::WalkScratch;
 use crate::sparse::{FactorError, Scalar, UpperCsc};
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::ldlt::factor::LdltError;
@@ -27,19 +29,8 @@ pub struct DynamicLdlt<T> {
     pub(crate) cols: Vec<Column<T>>,
     pub(crate) d: Vec<f64>,
     pub(crate) children: Vec<Vec<u32>>,
-    /// Dense accumulators for the `w_t`, one vector per slot `t` (so that
-    /// a run of rows is a slice), all zero between calls.
-    pub(crate) work: Vec<Vec<T>>,
-    pub(crate) scratch_rows: Vec<u32>,
-    pub(crate) scratch_vals: Vec<T>,
-    /// The rows the paths joining at a column bring to it.
-    pub(crate) extra: Vec<u32>,
-    /// Rows the last column of an update walk gained.
-    pub(crate) added: Vec<u32>,
-    /// Which vector each live pivot of a column belongs to.
-    pub(crate) slots: [u8; super::update::MAX_RANK],
-    /// The paths of the walk under way.
-    pub(crate) paths: super::update::Paths,
+    /// The update walks' working memory.
+    pub(super) scratch: WalkScratch<T>,
     /// What the update walks have cost so far.
     pub(crate) walked: WalkStats,
     /// With a right-hand side, the last row and pivot of the factor of
@@ -76,13 +67,7 @@ impl<T: Scalar> DynamicLdlt<T> {
             cols: Vec::new(),
             d: Vec::new(),
             children: Vec::new(),
-            work: vec![Vec::new(); super::update::MAX_RANK],
-            scratch_rows: Vec::new(),
-            scratch_vals: Vec::new(),
-            extra: Vec::new(),
-            added: Vec::new(),
-            slots: [0; super::update::MAX_RANK],
-            paths: super::update::Paths::default(),
+            scratch: WalkScratch::new(0),
             walked: WalkStats::default(),
             augmented: None,
         }
@@ -90,11 +75,9 @@ impl<T: Scalar> DynamicLdlt<T> {
 
     /// Factorises `P A Pᵀ` with faer's LDLᴴ, where `perm[k]` is the
     /// variable of `a` eliminated `k`-th. Column `k` of the result is
-    /// variable `perm[k]`. Supernodal (City10000's Gauss–Newton system at
-    /// 9,000 poses: 30 ms against 56 ms simplicial, copy included; faer's
-    /// own estimate chose simplicial for Manhattan's, and its replay took
-    /// 0.595 s against 0.65 s, medians of six); fundamental supernodes
-    /// only, so that the columns keep their exact patterns.
+    /// variable `perm[k]`. Supernodal (30 ms against 56 ms simplicial on
+    /// City10000's Gauss–Newton system at 9,000 poses); fundamental
+    /// supernodes only, so that the columns keep their exact patterns.
     pub fn from_matrix(a: &UpperCsc<T>, perm: &[usize]) -> Result<Self, FactorError> {
         Self::from_matrix_with(a, perm, SupernodalThreshold::FORCE_SUPERNODAL)
     }
@@ -167,7 +150,7 @@ impl<T: Scalar> DynamicLdlt<T> {
                 for (sn, (&begin, &end)) in s.supernode_begin().iter().zip(s.supernode_end()).enumerate() {
                     pattern.clear();
                     pattern.extend(row_idx[rows_at[sn]..rows_at[sn + 1]].iter().map(|&r| r as u32));
-                    super::runs::run_starts(&pattern, &mut pattern_starts);
+                    run_starts(&pattern, &mut pattern_starts);
                     let width = end - begin;
                     let height = width + pattern.len();
                     let block = &values[vals_at[sn]..vals_at[sn + 1]];
@@ -188,7 +171,7 @@ impl<T: Scalar> DynamicLdlt<T> {
                         starts.extend(pattern_starts[skip..].iter().map(|&p| p + inner as u32));
                         debug_assert_eq!(starts, {
                             let mut check = Vec::new();
-                            super::runs::run_starts(&rows, &mut check);
+                            run_starts(&rows, &mut check);
                             check
                         });
                         f.push_column_with_starts(
@@ -202,7 +185,7 @@ impl<T: Scalar> DynamicLdlt<T> {
                 }
             }
         }
-        f.work = vec![vec![T::default(); n]; super::update::MAX_RANK];
+        f.scratch = WalkScratch::new(n);
         f.rebuild_children();
         Ok(f)
     }
@@ -211,7 +194,7 @@ impl<T: Scalar> DynamicLdlt<T> {
     /// positive.
     fn push_column(&mut self, k: usize, d: f64, rows: Vec<u32>, vals: Vec<T>) -> Result<(), FactorError> {
         let mut starts = Vec::new();
-        super::runs::run_starts(&rows, &mut starts);
+        run_starts(&rows, &mut starts);
         self.push_column_with_starts(k, d, rows, vals, starts)
     }
 
@@ -241,7 +224,7 @@ impl<T: Scalar> DynamicLdlt<T> {
         self.cols.push(Column::default());
         self.d.push(0.0);
         self.children.push(Vec::new());
-        self.work.iter_mut().for_each(|w| w.push(T::default()));
+        self.scratch.append();
         self.cols.len() - 1
     }
 

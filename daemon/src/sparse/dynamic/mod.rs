@@ -27,14 +27,16 @@ mod augmented;
 mod factor;
 mod marginal;
 pub(crate) mod runs;
+mod scratch;
 mod solve;
 mod update;
 
 pub use augmented::{AugmentedCholesky, SolveStats};
 pub use factor::{DynamicLdlt, WalkStats};
 pub use marginal::Marginal;
+pub use scratch::MAX_RANK;
 pub use solve::IncrementalCholesky;
-pub use update::{UpdateError, MAX_RANK};
+pub use update::UpdateError;
 
 #[cfg(test)]
 mod tests;

@@ -5,13 +5,13 @@
 //! nearly dense (City10000: 91% of the entries an update walks sit in runs
 //! of 8 rows or more), so a run's rows address a contiguous slice of any
 //! dense vector, and the loop over it vectorises. Each function here does
-//! what the per-row loop did, in the same order per row, so the results are
-//! the same up to rounding.
+//! the per-row loop's arithmetic, in the same order per row, so the results
+//! are the same up to rounding.
 
 use crate::sparse::Scalar;
 
 // the kernels below are written for at most this many vectors
-const _: () = assert!(super::update::MAX_RANK == 12);
+const _: () = assert!(super::scratch::MAX_RANK == 12);
 
 /// `$fixed::<K>(w, args)` for `K` = `w.len()` vectors from 1 to
 /// `MAX_RANK`, else `$generic(w, args)`.
@@ -252,11 +252,10 @@ pub(crate) fn gather_dot<M: Scalar, V: Scalar + std::ops::Mul<M, Output = V>>(
 
 /// [`gather_dot`] for reals with fused multiply-adds, in four running
 /// sums taken row by row across the runs. A column's runs are short (eight
-/// rows on average once [`dense_enough`]), so summing run by run left most
-/// of each column to one serial chain and a loop set up per run; with `x`
-/// in cache the gather costs less than either (`incremental_path`, solve
-/// ms per 100 keyframes at 3,000 / 6,000 / 9,000: 1.6–1.7 / 7.7–9.0 /
-/// 6.6–7.1 → 1.4–1.5 / 6.4–6.5 / 6.2–6.5). Sums in another order than
+/// rows on average once [`dense_enough`]): summing run by run would leave
+/// most of each column to one serial chain and set a loop up per run,
+/// while with `x` in cache the gather costs less (the solve 7–20% faster
+/// in the `incremental_path` bench). Sums in another order than
 /// [`gather_dot`], so the last bits differ.
 ///
 /// # Safety

@@ -19,8 +19,8 @@
 //! in its parent's (the structure of a Cholesky factor), so once a column on
 //! a path gains no rows, no column above it can: from there the path just
 //! follows parents. (Merging every vector's rows into the first column
-//! instead, as this walk once did, made one path of them all and filled in
-//! what separate paths never touch: 25-33% slower on City10000.)
+//! instead would make one path of them all and fill in what separate paths
+//! never touch: 25–33% slower on City10000.)
 //!
 //! A zero pivot (a variable with no weight yet, as a keyframe has between
 //! its appending and its first edge) takes a whole vector: its `α_t`
@@ -34,11 +34,9 @@
 
 use super::factor::DynamicLdlt;
 use super::runs::{dense_enough, extend_run_starts, run_starts};
+use super::scratch::MAX_RANK;
 use crate::sparse::Scalar;
 use std::fmt;
-
-/// Most vectors one call takes.
-pub const MAX_RANK: usize = 12;
 
 /// A downdate that would leave the matrix not positive definite.
 #[derive(Clone, Debug, PartialEq)]
@@ -94,7 +92,7 @@ impl<T: Scalar> DynamicLdlt<T> {
         }
         // each vector's path starts at its first nonzero, holding its other
         // nonzero rows to merge there; vectors that start together walk as one
-        let mut paths = std::mem::take(&mut self.paths);
+        let mut paths = std::mem::take(&mut self.scratch.paths);
         paths.clear();
         for (t, w) in ws.iter().enumerate() {
             let Some(first) = w
@@ -108,7 +106,7 @@ impl<T: Scalar> DynamicLdlt<T> {
             let pending = paths.start(first);
             for &(i, v) in w.iter() {
                 if v != T::default() {
-                    self.work[t][i] += v;
+                    self.scratch.work[t][i] += v;
                     if i != first {
                         pending.push(i as u32);
                     }
@@ -118,10 +116,10 @@ impl<T: Scalar> DynamicLdlt<T> {
         let mut alpha = [sigma; MAX_RANK];
         let mut result = Ok(());
         self.walked.walks += 1;
-        let mut extra = std::mem::take(&mut self.extra);
+        let mut extra = std::mem::take(&mut self.scratch.extra);
         // rows the previous column gained in this walk: by the nesting of
         // patterns, the only ones its parent can be missing
-        let mut added = std::mem::take(&mut self.added);
+        let mut added = std::mem::take(&mut self.scratch.added);
         while let Some(j) = paths.lowest() {
             // the paths that reach column j join here, in the lowest slot
             extra.clear();
@@ -161,9 +159,9 @@ impl<T: Scalar> DynamicLdlt<T> {
                 a.pivot += a_t * tail[t].abs2();
             }
         }
-        self.extra = extra;
-        self.added = added;
-        self.paths = paths;
+        self.scratch.extra = extra;
+        self.scratch.added = added;
+        self.scratch.paths = paths;
         result
     }
 
@@ -181,7 +179,7 @@ impl<T: Scalar> DynamicLdlt<T> {
         let mut gammas = [T::default(); MAX_RANK];
         let mut live = 0;
         for (t, a) in alpha.iter_mut().enumerate().take(k) {
-            let p = std::mem::take(&mut self.work[t][j]);
+            let p = std::mem::take(&mut self.scratch.work[t][j]);
             if p == T::default() || *a == 0.0 {
                 continue;
             }
@@ -189,7 +187,7 @@ impl<T: Scalar> DynamicLdlt<T> {
             let dbar = d + *a * p.abs2();
             if dbar.is_nan() || dbar <= 0.0 || (sigma < 0.0 && dbar <= 1e-14 * d) {
                 // leave the accumulator clean before bailing out
-                for w in &mut self.work {
+                for w in &mut self.scratch.work {
                     for r in &self.cols[j].rows {
                         w[*r as usize] = T::default();
                     }
@@ -202,7 +200,7 @@ impl<T: Scalar> DynamicLdlt<T> {
             *a *= d / dbar;
             self.d[j] = dbar;
             // remember which vector slot this pivot belongs to
-            self.slots[live] = t as u8;
+            self.scratch.slots[live] = t as u8;
             live += 1;
         }
         if live == 0 {
@@ -212,7 +210,7 @@ impl<T: Scalar> DynamicLdlt<T> {
             // the augmented row: one more row of column j
             let mut z = a.z[j];
             for i in 0..live {
-                let t = self.slots[i] as usize;
+                let t = self.scratch.slots[i] as usize;
                 let wi = tail[t] - ps[i] * z;
                 tail[t] = wi;
                 z += gammas[i] * wi;
@@ -220,9 +218,9 @@ impl<T: Scalar> DynamicLdlt<T> {
             a.z[j] = z;
         }
         let col = &mut self.cols[j];
-        let slots = &self.slots[..live];
+        let slots = &self.scratch.slots[..live];
         let mut w: [&mut [T]; MAX_RANK] = Default::default();
-        let mut rest = &mut self.work[..];
+        let mut rest = &mut self.scratch.work[..];
         let mut taken = 0;
         // the live slots are increasing: split them off in turn
         for (i, &t) in slots.iter().enumerate() {
@@ -279,7 +277,7 @@ impl<T: Scalar> DynamicLdlt<T> {
             extend_run_starts(&col.rows, old, &mut col.starts);
             return;
         }
-        let (rows, vals) = (&mut self.scratch_rows, &mut self.scratch_vals);
+        let (rows, vals) = (&mut self.scratch.rows, &mut self.scratch.vals);
         rows.clear();
         vals.clear();
         let (mut a, mut b) = (0, 0);
@@ -325,75 +323,4 @@ fn is_subset(a: &[u32], b: &[u32]) -> bool {
         k += 1;
     }
     true
-}
-
-/// The paths of one multiple-rank walk (Davis and Hager's multiple-rank
-/// modification): each vector climbs the elimination tree from its first
-/// nonzero; where paths reach the same column they join and go on as one.
-/// Each holds the rows its next column must gain before its step.
-#[derive(Clone, Debug, Default)]
-pub(crate) struct Paths {
-    /// Next column of each slot; `usize::MAX` for a free slot.
-    next: [usize; MAX_RANK],
-    /// Rows to merge into that column (unsorted, may repeat).
-    pending: [Vec<u32>; MAX_RANK],
-}
-
-impl Paths {
-    fn clear(&mut self) {
-        self.next = [usize::MAX; MAX_RANK];
-    }
-
-    /// The slot of a path at `column`, a new one if none is there; returns
-    /// its pending rows.
-    fn start(&mut self, column: usize) -> &mut Vec<u32> {
-        let slot = match self.next.iter().position(|&n| n == column) {
-            Some(s) => s,
-            None => {
-                let s = self
-                    .next
-                    .iter()
-                    .position(|&n| n == usize::MAX)
-                    .expect("at most MAX_RANK vectors, one path each");
-                self.next[s] = column;
-                self.pending[s].clear();
-                s
-            }
-        };
-        &mut self.pending[slot]
-    }
-
-    /// The lowest column some path is at.
-    fn lowest(&self) -> Option<usize> {
-        self.next.iter().copied().filter(|&n| n != usize::MAX).min()
-    }
-
-    /// Joins every path at `column` into the lowest such slot, appending
-    /// their pending rows to `rows`; returns the slot.
-    fn join_at(&mut self, column: usize, rows: &mut Vec<u32>) -> usize {
-        let mut slot = usize::MAX;
-        for s in 0..MAX_RANK {
-            if self.next[s] == column {
-                rows.extend_from_slice(&self.pending[s]);
-                if slot == usize::MAX {
-                    slot = s;
-                } else {
-                    self.next[s] = usize::MAX;
-                }
-            }
-        }
-        slot
-    }
-
-    /// Moves `slot` on to `column`, which must gain `rows`.
-    fn advance(&mut self, slot: usize, column: usize, rows: &[u32]) {
-        self.next[slot] = column;
-        self.pending[slot].clear();
-        self.pending[slot].extend_from_slice(rows);
-    }
-
-    /// Frees `slot`: its path left the tree at a root.
-    fn end(&mut self, slot: usize) {
-        self.next[slot] = usize::MAX;
-    }
 }

@@ -4,9 +4,10 @@
 //! Switchable constraints minimise `s² χ² + Ξ (1 − s)²` per loop closure;
 //! setting the derivative in `s` to zero gives the switch in closed form,
 //! so only poses are optimised and `s²` is an iteratively reweighted least
-//! squares weight on the edge's `Ω` (ALGORITHM.md §3). Each kernel gives
-//! the switch `s(χ²)` and the cost `ρ(χ²)` whose derivative is `s²`, which
-//! is what the polish compares when it accepts a step.
+//! squares weight on the edge's `Ω` (docs/design.md, "Robust kernels and
+//! switches"). Each kernel gives the switch `s(χ²)` and the cost `ρ(χ²)`
+//! whose derivative is `s²`, which is what the polish compares when it
+//! accepts a step.
 
 use crate::geometry::Pose2;
 use crate::graph::{edge_error, Edge};
@@ -39,8 +40,8 @@ pub enum Kernel {
 /// DCS's default Φ. A switch falls below 0.5 once `χ² > 3Φ`; at
 /// `Φ = 16.27 / 3` that is the 99.9% quantile of χ² with 3 degrees of
 /// freedom, so a loop closure whose information is right is held wrong
-/// once in a thousand. (Φ = 1, ALGORITHM.md's measurement, rejected 46 of
-/// 150 true loop closures of the calibrated synthetic world.)
+/// once in a thousand (Φ = 1 rejects 46 of 150 true loop closures of the
+/// calibrated synthetic world).
 pub const DEFAULT_PHI: f64 = 16.27 / 3.0;
 
 impl Default for Kernel {
