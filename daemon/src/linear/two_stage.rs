@@ -1,7 +1,8 @@
 //! The two-stage linear initialiser (slamd's default; compare GTSAM's LAGO).
 //!
-//! Paper A's virtual axes, pinned to unit length (ALGORITHM.md §2). With one
-//! complex axis `r_i = e^{iθ_i}` per keyframe:
+//! Paper A's virtual axes, pinned to unit length (docs/design.md, "Two
+//! stages: axes, then positions"). With one complex axis `r_i = e^{iθ_i}`
+//! per keyframe:
 //!
 //! 1. **Axes.** `r_j − e^{iθ_ij} r_i = 0` for every edge, weight `1/σθ²`,
 //!    gauge `r_0 = 1`. Solve, then normalise `r_i ← r_i / |r_i|`.

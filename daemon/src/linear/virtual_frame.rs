@@ -1,8 +1,9 @@
 //! Paper A as printed: linear SLAM on virtual coordinates.
 //!
-//! Kept to measure it, not to use it: with only keyframe 0 pinned, least
-//! squares shrinks the virtual axes of distant frames, and one global scale
-//! cannot undo a shrink that varies across the map (ALGORITHM.md §1, error 4).
+//! Selectable (`--formulation virtual-frame`), not the default: with only
+//! keyframe 0 pinned, least squares shrinks the virtual axes of distant
+//! frames, and one global scale cannot undo a shrink that varies across
+//! the map (docs/design.md, "Paper A as printed").
 //!
 //! Every keyframe `k` gets two virtual points `k_x = p_k + e^{iθ_k}` and
 //! `k_y = p_k + i·e^{iθ_k}`. An edge `(i, j)` with `T_ij = (t, e^{iθ})` puts

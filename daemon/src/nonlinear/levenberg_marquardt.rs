@@ -4,7 +4,8 @@
 //! `g = Σ Jᵀ Ω e` and `D = diag(H)` (Marquardt's scaling), and accepts the
 //! step only when χ² drops. The gain ratio `ρ = (χ² − χ²_new) / δᵀ(λDδ − g)`
 //! steers λ (Nielsen's rule). Undamped Gauss–Newton can overshoot from a
-//! linear initialiser (ALGORITHM.md §2), hence the damping.
+//! linear initialiser (docs/design.md, "The polish and the cost"), hence
+//! the damping.
 //!
 //! The pattern of `H` and its fill-reducing ordering (AMD on the pose graph,
 //! each pose's 3 variables kept together) are computed once; each iteration only refills

@@ -29,7 +29,7 @@ use crate::robust::kernel::dcs;
 use crate::robust::Kernel;
 
 /// The `[engine.outliers]` settings. The defaults won the benchmark in
-/// `benches/outliers.py` (README, "Robustness").
+/// `benches/outliers.py` (docs/robustness.md).
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct OutlierConfig {
