@@ -5,6 +5,7 @@ use slamd_client::{
     Config, EdgeInput, EdgeKind, Embedded, EngineConfig, Frontend, Information, Pose2, Publish,
     RejectionReason, Snapshots,
 };
+use slamd_protocol::codec::{edge_out, Origin};
 use slamd_protocol::{Edge, PROTOCOL_VERSION};
 use slamd_tests::{read, slamd_bin};
 use std::collections::HashMap;
@@ -167,21 +168,16 @@ fn hostile_stream_gets_clean_rejections_while_valid_data_flows() {
     let snaps = Snapshots::open(&daemon.namespace).unwrap();
     let mut expected: Vec<(RejectionReason, u64)> = Vec::new();
     let good = |k: usize| exact(&truth, k - 1, k, EdgeKind::Odometry);
+    // a loop closure as the codec encodes it; the frontend numbers it
     let raw = |k: usize| {
         let e = exact(&truth, k - 1, k, EdgeKind::LoopClosure);
-        Edge {
-            from: e.from,
-            to: e.to,
-            dx: e.measurement.x,
-            dy: e.measurement.y,
-            dtheta: e.measurement.theta,
-            information: e.information.upper(),
-            kind: 1,
-            frontend: 0,
-            sequence: 0,
-            protocol: PROTOCOL_VERSION,
-            reserved: 0,
-        }
+        edge_out(
+            &e,
+            Origin {
+                frontend: 0,
+                sequence: 0,
+            },
+        )
     };
     for k in 0..truth.len() {
         f.add_keyframe(k as u64, 0, None).unwrap();

@@ -91,23 +91,10 @@ pub fn factorise(mut model: Model, lin: Vec<Pose2>, config: &EngineConfig) -> Re
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::engine::state::tests::{keyframe, odometry};
     use crate::engine::{EdgeInput, Op};
-    use crate::graph::{EdgeKind, Information, KeyframeId};
+    use crate::graph::{EdgeKind, Information};
     use crate::outliers::{OutlierConfig, OFF_BELOW};
-
-    fn keyframe(id: KeyframeId) -> Op {
-        Op::Keyframe { id, guess: None }
-    }
-
-    fn odometry(from: KeyframeId, to: KeyframeId, step: Pose2) -> Op {
-        Op::Edge(EdgeInput::new(
-            from,
-            to,
-            step,
-            Information::identity(),
-            EdgeKind::Odometry,
-        ))
-    }
 
     /// Six keyframes 1 m apart along x, then two loop closures from 0 to
     /// 5 (edges 5 and 6): one `x` metres long (let in on arrival when near

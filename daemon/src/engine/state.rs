@@ -466,16 +466,18 @@ impl State {
 }
 
 #[cfg(test)]
-mod tests {
+pub(super) mod tests {
     use super::*;
     use crate::engine::EdgeInput;
     use crate::graph::Information;
 
-    fn keyframe(id: KeyframeId) -> Op {
+    /// Keyframe `id`, no guess.
+    pub fn keyframe(id: KeyframeId) -> Op {
         Op::Keyframe { id, guess: None }
     }
 
-    fn odometry(from: KeyframeId, to: KeyframeId, step: Pose2) -> Op {
+    /// Odometry `step` from `from` to `to`, unit information.
+    pub fn odometry(from: KeyframeId, to: KeyframeId, step: Pose2) -> Op {
         Op::Edge(EdgeInput::new(
             from,
             to,
