@@ -14,7 +14,7 @@ of the georeferenced positions against the fixes' true ENU positions.
 import argparse, json, os, subprocess, sys, tempfile
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-DATA = os.path.normpath(os.path.join(HERE, "..", "..", "shared", "datasets"))
+DATA = os.environ.get("SLAMD_DATASETS") or os.path.normpath(os.path.join(HERE, "..", "..", "shared", "datasets"))
 TOOL = os.path.normpath(os.path.join(HERE, "..", "..", "shared", "tools", "synth_gps.py"))
 ORIGIN = "45.5138,9.2110"  # synth_gps.py's default
 CASES = [

@@ -28,7 +28,7 @@ import argparse, json, math, os, subprocess, sys, tempfile, time
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 SHARED = os.path.normpath(os.path.join(HERE, "..", "..", "shared"))
-DATA = os.path.join(SHARED, "datasets")
+DATA = os.environ.get("SLAMD_DATASETS") or os.path.join(SHARED, "datasets")
 TOOL = os.path.join(SHARED, "tools", "add_outliers.py")
 DATASETS = {  # name: (file, ground truth)
     "manhattan": ("manhattanolson3500_g2oversion.g2o", "groundtruth/manhattanolson3500_groundtruth_isam.txt"),

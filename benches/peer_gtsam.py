@@ -16,7 +16,7 @@ of --repeat runs.
 import argparse, json, math, os, subprocess, sys, tempfile, time
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-DATA = os.path.normpath(os.path.join(HERE, "..", "..", "shared", "datasets"))
+DATA = os.environ.get("SLAMD_DATASETS") or os.path.normpath(os.path.join(HERE, "..", "..", "shared", "datasets"))
 CASES = [  # file, optimum χ², ground truth
     ("manhattanolson3500_g2oversion.g2o", 146.077, "groundtruth/manhattanolson3500_nodes_groundtruth.dat"),
     ("city10000.g2o", 511.985, "groundtruth/city10000_groundtruth_isam.txt"),

@@ -17,7 +17,7 @@ process.
 import argparse, json, math, os, subprocess, sys, tempfile, time
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-DATA = os.path.normpath(os.path.join(HERE, "..", "..", "shared", "datasets"))
+DATA = os.environ.get("SLAMD_DATASETS") or os.path.normpath(os.path.join(HERE, "..", "..", "shared", "datasets"))
 DEFAULT = ["manhattanolson3500_g2oversion.g2o", "city10000.g2o", "w10000.graph"]
 
 

@@ -14,8 +14,9 @@ import argparse, json, math, os, subprocess, sys, tempfile
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 SHARED = os.path.normpath(os.path.join(HERE, "..", "..", "shared"))
-CLEAN = os.path.join(SHARED, "datasets", "city10000.g2o")
-GT = os.path.join(SHARED, "datasets", "groundtruth", "city10000_groundtruth_isam.txt")
+DATA = os.environ.get("SLAMD_DATASETS") or os.path.join(SHARED, "datasets")
+CLEAN = os.path.join(DATA, "city10000.g2o")
+GT = os.path.join(DATA, "groundtruth", "city10000_groundtruth_isam.txt")
 
 
 def table(path):

@@ -37,8 +37,8 @@ fn batch_of(engine: &Engine) -> Vec<Pose2> {
         .edges()
         .iter()
         .zip(engine.edge_weights())
-        .filter(|(_, &w)| w > 0.0)
-        .map(|(e, &w)| {
+        .filter(|(_, w)| *w > 0.0)
+        .map(|(e, w)| {
             let mut e = *e;
             e.information = e.information.scaled(w);
             e

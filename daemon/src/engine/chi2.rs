@@ -82,7 +82,7 @@ impl Chi2Cache {
     /// Recomputes every term (kills round-off drift of the running sum).
     pub fn recompute(&mut self, model: &Model, estimate: &[Pose2]) {
         for (e, edge) in model.graph.edges().iter().enumerate() {
-            self.per_edge[e] = if model.applied[e] {
+            self.per_edge[e] = if model.edges[e].applied {
                 model.weight(e) * self.turned_chi2(e, edge, estimate)
             } else {
                 0.0

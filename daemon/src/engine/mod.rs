@@ -279,16 +279,16 @@ impl Engine {
     }
 
     /// Current weight of each edge (as set by [`Self::set_edge_weight`]).
-    pub fn edge_weights(&self) -> &[f64] {
-        &self.state.model.scale
+    pub fn edge_weights(&self) -> Vec<f64> {
+        self.state.model.edges.iter().map(|s| s.scale).collect()
     }
 
     /// The outlier filter's switch `s ∈ [0, 1]` of each edge, by index:
     /// 1 for odometry, below [`REJECTED_BELOW`](crate::outliers::REJECTED_BELOW)
     /// for a loop closure the filter holds wrong. The edge's information
     /// counts `s²` times.
-    pub fn switches(&self) -> &[f64] {
-        &self.state.model.switch
+    pub fn switches(&self) -> Vec<f64> {
+        self.state.model.edges.iter().map(|s| s.switch).collect()
     }
 
     /// Work counters.

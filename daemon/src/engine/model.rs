@@ -14,22 +14,49 @@ use crate::outliers::{robust_polish, OFF_BELOW, REJECTED_BELOW};
 use std::collections::HashMap;
 use std::sync::atomic::AtomicBool;
 
+/// What the engine holds of one edge besides its measurement.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct EdgeState {
+    /// The weight set through the engine (1 unless reweighted; 0 removes).
+    pub scale: f64,
+    /// The outlier filter's switch `s ∈ [0, 1]` (1 for odometry).
+    pub switch: f64,
+    /// A loop closure let in on arrival (by its own error or by the gate's
+    /// pairing) since the last multi-start re-solve, which gets a start
+    /// without them.
+    pub admitted: bool,
+    /// Its terms are in the solvers.
+    pub applied: bool,
+}
+
+impl EdgeState {
+    /// A new edge: weight 1, switched on, not yet in the solvers.
+    pub const NEW: EdgeState = EdgeState {
+        scale: 1.0,
+        switch: 1.0,
+        admitted: false,
+        applied: false,
+    };
+
+    /// The multiplier of the edge's information: `scale · s²`, or 0 when
+    /// the switch is off ([`OFF_BELOW`]).
+    pub fn weight(&self) -> f64 {
+        let s = self.switch;
+        if s < OFF_BELOW {
+            0.0
+        } else {
+            self.scale * s * s
+        }
+    }
+}
+
 /// The graph and its bookkeeping, without the solvers.
 #[derive(Clone, Debug, Default)]
 pub struct Model {
     /// Keyframes in arrival order (index 0 is the gauge) and every edge.
     pub graph: PoseGraph,
-    /// The weight of each edge (1 unless reweighted).
-    pub scale: Vec<f64>,
-    /// The outlier filter's switch `s ∈ [0, 1]` of each edge (1 for
-    /// odometry); its information is multiplied by `scale · s²`.
-    pub switch: Vec<f64>,
-    /// Whether each loop closure was let in on arrival (by its own error
-    /// or by the gate's pairing) since the last multi-start re-solve, which
-    /// gets a start without them.
-    pub admitted: Vec<bool>,
-    /// Whether each edge's terms are in the solvers.
-    pub applied: Vec<bool>,
+    /// What the engine holds of each edge, by index.
+    pub edges: Vec<EdgeState>,
     /// Whether each keyframe has joined (is linked to the gauge).
     pub joined: Vec<bool>,
     /// Edges waiting for a keyframe to join, by keyframe.
@@ -53,12 +80,7 @@ impl Model {
     /// The multiplier of edge `e`'s information: `scale · s²`, or 0 when
     /// the switch is off ([`OFF_BELOW`]).
     pub fn weight(&self, e: usize) -> f64 {
-        let s = self.switch[e];
-        if s < OFF_BELOW {
-            0.0
-        } else {
-            self.scale[e] * s * s
-        }
+        self.edges[e].weight()
     }
 
     /// The prior of fix `f` under the current georeference.
@@ -77,7 +99,7 @@ impl Model {
         weight: impl Fn(&Model, usize) -> f64,
     ) -> (Vec<Edge>, Vec<usize>) {
         let ids: Vec<usize> = (0..self.graph.edges().len())
-            .filter(|&e| self.applied[e] && self.scale[e] > 0.0)
+            .filter(|&e| self.edges[e].applied && self.edges[e].scale > 0.0)
             .collect();
         let edges = ids
             .iter()
@@ -123,7 +145,7 @@ impl Model {
         stop: &AtomicBool,
     ) -> Vec<Pose2> {
         let filter = &config.outliers;
-        let (edges, ids) = self.compact_edges(compact, |m, e| m.scale[e]);
+        let (edges, ids) = self.compact_edges(compact, |m, e| m.edges[e].scale);
         let switchable: Vec<bool> = ids
             .iter()
             .map(|&e| filter.switchable(&self.graph.edges()[e]))
@@ -147,10 +169,10 @@ impl Model {
             return initial;
         };
         for (a, &e) in ids.iter().enumerate() {
-            self.switch[e] = solution.switches[a];
+            self.edges[e].switch = solution.switches[a];
         }
         if matches!(polish, Polish::Full | Polish::FullInline | Polish::Closing) {
-            self.admitted.fill(false);
+            self.edges.iter_mut().for_each(|s| s.admitted = false);
         }
         solution.poses
     }
@@ -183,8 +205,8 @@ impl Model {
             } else {
                 1.0
             };
-            if ids.iter().any(|&e| self.switch[e] < rescue_below) {
-                starts.extend(self.linear_start(compact, joined, initial[0], |m, e| m.scale[e]));
+            if ids.iter().any(|&e| self.edges[e].switch < rescue_below) {
+                starts.extend(self.linear_start(compact, joined, initial[0], |m, e| m.edges[e].scale));
             }
             // and, closing (or always, `unadmitted_start`), without the
             // loop closures let in on arrival since the last of these
@@ -192,8 +214,8 @@ impl Model {
             // by the ones before it, and every other start then ends in
             // their basin
             let unadmitted_due = polish == Polish::Closing || config.outliers.unadmitted_start;
-            if unadmitted_due && ids.iter().any(|&e| self.admitted[e]) {
-                let unadmitted = |m: &Model, e: usize| if m.admitted[e] { 0.0 } else { m.weight(e) };
+            if unadmitted_due && ids.iter().any(|&e| self.edges[e].admitted) {
+                let unadmitted = |m: &Model, e: usize| if m.edges[e].admitted { 0.0 } else { m.weight(e) };
                 starts.extend(self.linear_start(compact, joined, initial[0], unadmitted));
             }
         }
@@ -262,7 +284,7 @@ impl Model {
         loop {
             let mut degree = vec![0usize; self.graph.len()];
             for (e, edge) in self.graph.edges().iter().enumerate() {
-                if self.applied[e] && self.weight(e) > 0.0 {
+                if self.edges[e].applied && self.weight(e) > 0.0 {
                     degree[edge.from] += 1;
                     degree[edge.to] += 1;
                 }
@@ -277,7 +299,7 @@ impl Model {
                 self.joined[k] = false;
                 for e in std::mem::take(&mut self.incident[k]) {
                     let e = e as usize;
-                    self.applied[e] = false;
+                    self.edges[e].applied = false;
                     let edge = self.graph.edges()[e];
                     let other = if edge.from == k { edge.to } else { edge.from };
                     self.incident[other].retain(|&x| x as usize != e);

@@ -64,7 +64,7 @@ pub fn factorise(mut model: Model, lin: Vec<Pose2>, config: &EngineConfig) -> Re
     let recent = config.recent_last;
     let (joined, compact) = model.compact_joined();
     let active: Vec<(usize, f64)> = (0..model.graph.edges().len())
-        .filter(|&e| model.applied[e] && model.weight(e) > 0.0)
+        .filter(|&e| model.edges[e].applied && model.weight(e) > 0.0)
         .map(|e| (e, model.weight(e)))
         .collect();
     // every fix on a joined keyframe enters the fresh factor
@@ -124,14 +124,14 @@ mod tests {
         let config = EngineConfig::default();
         let state = line_closed(&config, 5.0);
         let (agreeing, wrong) = (5, 6);
-        assert!(state.model.switch[agreeing] >= OFF_BELOW && state.model.admitted[agreeing]);
-        assert!(state.model.switch[wrong] < OFF_BELOW && !state.model.admitted[wrong]);
+        assert!(state.model.edges[agreeing].switch >= OFF_BELOW && state.model.edges[agreeing].admitted);
+        assert!(state.model.edges[wrong].switch < OFF_BELOW && !state.model.edges[wrong].admitted);
         // a relinearisation is no judgement; a multi-start re-solve is
         let estimate = state.estimate().to_vec();
         let relinearised = rebuild(state.model.clone(), &estimate, Polish::None, &config).unwrap();
-        assert!(relinearised.model.admitted[agreeing]);
+        assert!(relinearised.model.edges[agreeing].admitted);
         let resolved = rebuild(state.model.clone(), &estimate, Polish::Full, &config).unwrap();
-        assert!(!resolved.model.admitted.iter().any(|&a| a));
+        assert!(!resolved.model.edges.iter().any(|s| s.admitted));
     }
 
     /// The start without the loop closures let in on arrival: the closing
@@ -142,9 +142,9 @@ mod tests {
         let config = EngineConfig::default();
         // the loop closure let in pulls keyframe 5 by 0.3 m
         let state = line_closed(&config, 5.3);
-        assert!(state.model.admitted[5] && !state.model.admitted[6]);
+        assert!(state.model.edges[5].admitted && !state.model.edges[6].admitted);
         let (joined, compact) = state.model.compact_joined();
-        let (_, ids) = state.model.compact_edges(&compact, |m, e| m.scale[e]);
+        let (_, ids) = state.model.compact_edges(&compact, |m, e| m.edges[e].scale);
         let initial: Vec<Pose2> = joined.iter().map(|&k| state.estimate()[k]).collect();
         let starts = |config: &EngineConfig, polish| {
             state
@@ -181,9 +181,9 @@ mod tests {
         let mut state = line_closed(&config, 5.0);
         let wrong = 6;
         let mut counts = |switch: f64| {
-            state.model.switch[wrong] = switch;
+            state.model.edges[wrong].switch = switch;
             let (joined, compact) = state.model.compact_joined();
-            let (_, ids) = state.model.compact_edges(&compact, |m, e| m.scale[e]);
+            let (_, ids) = state.model.compact_edges(&compact, |m, e| m.edges[e].scale);
             let initial: Vec<Pose2> = joined.iter().map(|&k| state.estimate()[k]).collect();
             let starts = |polish| {
                 state

@@ -6,7 +6,7 @@
 
 use super::arrival::{ArrivalGate, Verdict};
 use super::chi2::Chi2Cache;
-pub use super::model::Model;
+pub use super::model::{EdgeState, Model};
 pub use super::op::{Op, Polish};
 use super::report::FactorWork;
 use super::solvers::Solvers;
@@ -135,10 +135,7 @@ impl State {
                     input.information,
                     input.kind,
                 )?;
-                self.model.scale.push(1.0);
-                self.model.switch.push(1.0);
-                self.model.admitted.push(false);
-                self.model.applied.push(false);
+                self.model.edges.push(EdgeState::NEW);
                 self.chi2.push_edge();
                 self.model.pending.push(e);
                 Ok(())
@@ -206,9 +203,9 @@ impl State {
     fn reweight(&mut self, e: usize, scale: f64) -> Result<(), EngineError> {
         self.check_weight(e, scale)?;
         let before = self.model.weight(e);
-        self.model.scale[e] = scale;
+        self.model.edges[e].scale = scale;
         let delta = self.model.weight(e) - before;
-        if self.model.applied[e] {
+        if self.model.edges[e].applied {
             if delta != 0.0 {
                 self.contribute(e, delta)?;
                 self.refresh_edge(e);
@@ -243,7 +240,7 @@ impl State {
     fn connect(&mut self, e: usize) -> Result<(), EngineError> {
         let mut queue = vec![e];
         while let Some(e) = queue.pop() {
-            if self.model.applied[e] {
+            if self.model.edges[e].applied {
                 continue;
             }
             let edge = self.model.graph.edges()[e];
@@ -254,8 +251,8 @@ impl State {
                     // with the switch its error has now
                     if self.gate.switchable(&edge) {
                         let s = self.arrival_switch(e, &edge)?;
-                        self.model.switch[e] = s;
-                        self.model.admitted[e] |= s >= OFF_BELOW;
+                        self.model.edges[e].switch = s;
+                        self.model.edges[e].admitted |= s >= OFF_BELOW;
                     }
                 }
                 (false, false) => {
@@ -267,7 +264,7 @@ impl State {
                     }
                     continue;
                 }
-                (true, false) | (false, true) if self.model.scale[e] == 0.0 => {
+                (true, false) | (false, true) if self.model.edges[e].scale == 0.0 => {
                     // a switched-off edge constrains nothing: it cannot join a keyframe
                     let k = if self.model.joined[i] { j } else { i };
                     let list = self.model.waiting.entry(k).or_default();
@@ -295,7 +292,7 @@ impl State {
                     queue.extend(self.model.waiting.remove(&k).unwrap_or_default());
                 }
             }
-            self.model.applied[e] = true;
+            self.model.edges[e].applied = true;
             self.model.incident[i].push(e as u32);
             self.model.incident[j].push(e as u32);
             let s = self.model.weight(e);
@@ -324,7 +321,7 @@ impl State {
                     if m != e {
                         self.restore(m)?;
                     }
-                    self.model.admitted[m] = true;
+                    self.model.edges[m].admitted = true;
                 }
                 Ok(1.0)
             }
@@ -350,10 +347,10 @@ impl State {
     /// Switches on loop closure `m`, switched off on arrival: its terms
     /// join the solvers at the estimate.
     fn restore(&mut self, m: usize) -> Result<(), EngineError> {
-        if !self.model.applied[m] || self.model.switch[m] >= OFF_BELOW {
+        if !self.model.edges[m].applied || self.model.edges[m].switch >= OFF_BELOW {
             return Ok(());
         }
-        self.model.switch[m] = 1.0;
+        self.model.edges[m].switch = 1.0;
         let w = self.model.weight(m);
         if w != 0.0 {
             self.contribute(m, w)?;
@@ -367,8 +364,8 @@ impl State {
     /// gauge), within [10⁻³, 1]; 1 while `r < 30`.
     fn variance_factor(&self) -> f64 {
         let m = &self.model;
-        let edges = (0..m.applied.len())
-            .filter(|&e| m.applied[e] && m.weight(e) > 0.0)
+        let edges = (0..m.edges.len())
+            .filter(|&e| m.edges[e].applied && m.weight(e) > 0.0)
             .count();
         let keyframes = m.joined.iter().filter(|&&j| j).count();
         let r = 3 * edges as i64 - 3 * (keyframes as i64 - 1);
