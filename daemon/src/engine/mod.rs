@@ -17,6 +17,14 @@
 //! newest keyframes last, a refactorisation; it then replays what arrived
 //! meanwhile and swaps in without stopping ingestion.
 //!
+//! The parts, one type each: `State` (the model, its solvers and the
+//! estimate, and how one [`Op`] applies), `Model` with its per-edge
+//! `EdgeState`, `Solvers` (the one seam between the Gauss–Newton and the
+//! two-stage systems), `Chi2Cache`, `ArrivalGate` (the switch a new loop
+//! closure enters with), `rebuild` (polish and fresh factor), `Schedule`
+//! (when a re-solve or refresh is due) and `Background` (the job on its
+//! thread and the ops it has yet to catch up with).
+//!
 //! ```
 //! use slamd::engine::{EdgeInput, Engine, EngineConfig};
 //! use slamd::geometry::Pose2;

@@ -83,6 +83,14 @@ impl Model {
         self.edges[e].weight()
     }
 
+    /// Edge `e` waits for keyframe `k` to join (once).
+    pub(super) fn wait_for(&mut self, k: usize, e: usize) {
+        let list = self.waiting.entry(k).or_default();
+        if !list.contains(&e) {
+            list.push(e);
+        }
+    }
+
     /// The prior of fix `f` under the current georeference.
     pub(super) fn prior(&self, f: usize) -> Option<PositionPrior> {
         let g = self.georef.as_ref()?;

@@ -256,21 +256,14 @@ impl State {
                     }
                 }
                 (false, false) => {
-                    for k in [i, j] {
-                        let list = self.model.waiting.entry(k).or_default();
-                        if !list.contains(&e) {
-                            list.push(e);
-                        }
-                    }
+                    self.model.wait_for(i, e);
+                    self.model.wait_for(j, e);
                     continue;
                 }
                 (true, false) | (false, true) if self.model.edges[e].scale == 0.0 => {
                     // a switched-off edge constrains nothing: it cannot join a keyframe
                     let k = if self.model.joined[i] { j } else { i };
-                    let list = self.model.waiting.entry(k).or_default();
-                    if !list.contains(&e) {
-                        list.push(e);
-                    }
+                    self.model.wait_for(k, e);
                     continue;
                 }
                 (true, false) | (false, true) => {

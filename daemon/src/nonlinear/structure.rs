@@ -155,9 +155,8 @@ impl HessianStructure {
 /// The block-level pattern of `H`: for each block column, the block rows
 /// its edges reach, sorted, the diagonal block last. A block pair is one
 /// entry here and nine (six on the diagonal) in the scalar pattern, so
-/// working it out at this level is a fraction of the cost (a fresh
-/// City10000 factor at 8,000+ keyframes spent ~20 ms of its ~90 ms
-/// building the scalar pattern from triplets).
+/// working it out at this level is a fraction of the cost of building the
+/// scalar pattern from triplets.
 struct BlockPattern {
     col_ptr: Vec<usize>,
     rows: Vec<u32>,

@@ -29,24 +29,21 @@ pub const PROBE_ITERATIONS: usize = 12;
 pub const PRUNE_RATIO: f64 = 2.0;
 
 /// A start whose cost after [`LOOK_ITERATIONS`] still exceeds this
-/// multiple of the lowest cost probed before it ends its probe there. On
-/// City10000 + 1000 random outliers the start that trusts every loop
-/// closure began 400× above the current estimate's cost and was still
-/// 100× above after its 12 iterations (1.3 s of a 4.2 s re-solve); on
-/// W10000, whose re-solves need that start, all starts lie within 1%.
+/// multiple of the lowest cost probed before it ends its probe there: a
+/// start bent by many wrong loop closures stays orders of magnitude above
+/// the others, while starts a re-solve needs lie within a few percent.
 pub const ABANDON_RATIO: f64 = 20.0;
 
-/// Iterations a start gets before [`ABANDON_RATIO`] is checked. One: on
-/// City10000 + 1000 random outliers the start that trusts every loop
-/// closure is still ~350× above after one, and each of its iterations
-/// costs 0.15–0.35 s against 0.025 s for the others (the outliers fill
-/// the factor in); W10000's re-solves, which need it, end the same.
+/// Iterations a start gets before [`ABANDON_RATIO`] is checked. One: a
+/// start that trusts many wrong loop closures is far above the others
+/// after one already, and each of its iterations costs several times
+/// theirs (the outliers fill the factor in).
 pub const LOOK_ITERATIONS: usize = 1;
 
 /// A switchable edge whose switch at the start of a polish is below this
 /// sits out its linear systems (it weighs `s² < 10⁻⁶` of itself), unless it
-/// wakes by the end. A thousand random wrong loop closures in the pattern
-/// made each factorisation of City10000 about ten times dearer (fill).
+/// wakes by the end: wrong long-range loop closures in the pattern make
+/// every factorisation dearer through fill.
 /// The polish's cost still counts them, and a dormant edge whose switch
 /// has risen past this at the polish's result joins a further round.
 pub const DORMANT_BELOW: f64 = 1e-3;
@@ -285,7 +282,7 @@ pub fn robust_polish(
     // every start gets a probe of a few iterations; those within
     // `PRUNE_RATIO` of the lowest cost go on to convergence (a start in a
     // wrong basin, such as a linear solution bent by a thousand outliers,
-    // ran to the cap of 100 iterations on City10000 for nothing: 24 s)
+    // would run to the iteration cap for nothing)
     let probe = LevenbergMarquardtParams {
         max_iterations: params.max_iterations.min(PROBE_ITERATIONS),
         ..params
