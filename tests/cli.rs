@@ -125,6 +125,61 @@ fn malformed_file_gives_line_and_reason_and_exit_code_2() {
     assert!(err.contains(":3: EDGE_SE2: non-finite number `inf`"), "{err}");
 }
 
+/// A square with a self-edge, an information that is not positive
+/// definite and a repeated vertex: refused as it is, solved with
+/// `--skip-invalid` (by `solve` and `replay`), which names what it left out.
+#[test]
+fn skip_invalid_solves_what_is_left_and_names_the_lines() {
+    let path = std::env::temp_dir().join(format!("slamd-skip-{}.g2o", std::process::id()));
+    std::fs::write(
+        &path,
+        "VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 1 0 0\nVERTEX_SE2 2 1 1 1.5708\nVERTEX_SE2 3 0 1 3.1416\n\
+         VERTEX_SE2 3 5 5 0\n\
+         EDGE_SE2 0 1 1 0 1.5708 1 0 0 1 0 1\n\
+         EDGE_SE2 1 2 1 0 1.5708 1 0 0 1 0 1\n\
+         EDGE_SE2 2 2 0 0 0 1 0 0 1 0 1\n\
+         EDGE_SE2 2 3 1 0 1.5708 1 0 0 1 0 1\n\
+         EDGE_SE2 3 0 1 0 1.5708 1 0 0 -1 0 1\n\
+         EDGE_SE2 3 0 1 0 1.5708 1 0 0 1 0 1\n",
+    )
+    .expect("write");
+    let file = path.to_str().expect("utf-8");
+    let (code, _, err) = run_slamd(&["solve", file]);
+    assert_eq!(code, 2);
+    assert!(
+        err.contains(":10: EDGE_SE2: information matrix is not positive definite"),
+        "{err}"
+    );
+    let expected = [
+        format!("{file}:5: duplicate keyframe id 3"),
+        format!("{file}:8: edge from keyframe 2 to itself"),
+        format!("{file}:10: EDGE_SE2: information matrix is not positive definite"),
+    ];
+    for command in [
+        &["solve", file, "--polish"][..],
+        &["replay", file, "--embedded"][..],
+    ] {
+        let mut args = command.to_vec();
+        args.extend(["--skip-invalid", "--json"]);
+        let v = run_json(&args);
+        assert_eq!(v["skipped_lines"]["count"], 3, "{command:?}: {v}");
+        assert_eq!(
+            v["skipped_lines"]["first"],
+            serde_json::json!(expected),
+            "{command:?}"
+        );
+        assert_eq!(v["edges"], 4, "{command:?}");
+        // the square closes exactly
+        let chi2 = v["chi2"].as_f64().expect("chi2");
+        assert!(chi2 < 1e-6, "{command:?}: {chi2}");
+    }
+    // as text, the count and the lines go to stderr
+    let (code, _, err) = run_slamd(&["solve", file, "--skip-invalid"]);
+    assert_eq!(code, 0, "{err}");
+    assert!(err.contains("skipped 3 invalid line(s)"), "{err}");
+    assert!(err.contains(&expected[1]), "{err}");
+}
+
 #[test]
 fn disconnected_graph_is_an_error_not_a_nan() {
     let path = std::env::temp_dir().join(format!("slamd-split-{}.g2o", std::process::id()));

@@ -3,7 +3,9 @@
 //!
 //! Every reader reports a bad line as a [`ReadError`] naming the file, the
 //! line and the reason. A non-finite number or an information matrix that is
-//! not positive definite is an error, never a silent NaN.
+//! not positive definite is an error, never a silent NaN. Real files are
+//! imperfect: with [`OnInvalid::Skip`] a graph reader leaves such lines out
+//! and returns them, and the rest of the file is read as usual.
 
 mod error;
 mod g2o;
@@ -71,19 +73,56 @@ pub(crate) enum Record {
     Skip,
 }
 
-/// Reads a graph file, detecting its format.
+/// What a graph reader does with a line it would refuse: a malformed line,
+/// a non-finite number, an information matrix that is not positive
+/// definite, an edge from a keyframe to itself or to an undeclared one, a
+/// repeated vertex.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum OnInvalid {
+    /// The file is refused at the first such line.
+    #[default]
+    Refuse,
+    /// The line is left out and reported; the first of repeated vertices
+    /// stays.
+    Skip,
+}
+
+/// Reads a graph file, detecting its format; refuses it with the first
+/// line that does not parse, else the first that breaks the graph.
 pub fn read_graph(path: &Path) -> Result<PoseGraph, ReadError> {
+    read_graph_with(path, OnInvalid::Refuse).map(|(graph, _)| graph)
+}
+
+/// Reads a graph file, detecting its format. Returns the graph and, with
+/// [`OnInvalid::Skip`], the lines left out, in file order. A file that
+/// cannot be read is an error either way.
+pub fn read_graph_with(path: &Path, on_invalid: OnInvalid) -> Result<(PoseGraph, Vec<ReadError>), ReadError> {
     let text = std::fs::read_to_string(path).map_err(|e| ReadError::io(path, e))?;
     let format = Format::detect(path, &text);
-    parse_graph(path, &text, format)
+    parse_graph_with(path, &text, format, on_invalid)
 }
 
 /// Parses graph text of a known format. `path` only labels errors.
 pub fn parse_graph(path: &Path, text: &str, format: Format) -> Result<PoseGraph, ReadError> {
+    parse_graph_with(path, text, format, OnInvalid::Refuse).map(|(graph, _)| graph)
+}
+
+/// [`parse_graph`], leaving out bad lines with [`OnInvalid::Skip`] and
+/// returning them.
+pub fn parse_graph_with(
+    path: &Path,
+    text: &str,
+    format: Format,
+    on_invalid: OnInvalid,
+) -> Result<(PoseGraph, Vec<ReadError>), ReadError> {
     let parse_line = match format {
         Format::G2o => g2o::parse_line,
         Format::Toro => toro::parse_line,
         Format::Isam => isam::parse_line,
+    };
+    let mut bad = Invalid {
+        on_invalid,
+        skipped: Vec::new(),
     };
     let mut vertices = Vec::new();
     let mut edges = Vec::new();
@@ -94,13 +133,35 @@ pub fn parse_graph(path: &Path, text: &str, format: Format) -> Result<PoseGraph,
             continue;
         }
         let tokens: Vec<&str> = content.split_whitespace().collect();
-        match parse_line(&tokens).map_err(|kind| ReadError::at(path, line_no, kind))? {
-            Record::Vertex(id, pose) => vertices.push((line_no, id, pose)),
-            Record::Edge(i, j, m, info) => edges.push((line_no, i, j, m, info)),
-            Record::Skip => {}
+        match parse_line(&tokens) {
+            Ok(Record::Vertex(id, pose)) => vertices.push((line_no, id, pose)),
+            Ok(Record::Edge(i, j, m, info)) => edges.push((line_no, i, j, m, info)),
+            Ok(Record::Skip) => {}
+            Err(kind) => bad.line(ReadError::at(path, line_no, kind))?,
         }
     }
-    assemble(path, vertices, edges)
+    let graph = assemble(path, vertices, edges, &mut bad)?;
+    bad.skipped.sort_by_key(|e| e.line);
+    Ok((graph, bad.skipped))
+}
+
+/// Bad lines: refused, or collected.
+struct Invalid {
+    on_invalid: OnInvalid,
+    skipped: Vec<ReadError>,
+}
+
+impl Invalid {
+    /// Refuses the file with `e`, or records the line and goes on.
+    fn line(&mut self, e: ReadError) -> Result<(), ReadError> {
+        match self.on_invalid {
+            OnInvalid::Refuse => Err(e),
+            OnInvalid::Skip => {
+                self.skipped.push(e);
+                Ok(())
+            }
+        }
+    }
 }
 
 type VertexLine = (usize, KeyframeId, Pose2);
@@ -108,34 +169,41 @@ type EdgeLine = (usize, KeyframeId, KeyframeId, Pose2, Information);
 
 /// Builds the graph. With `VERTEX` lines, an edge to an undeclared keyframe is
 /// an error; without any, the keyframes are the edge end points.
-fn assemble(path: &Path, vertices: Vec<VertexLine>, edges: Vec<EdgeLine>) -> Result<PoseGraph, ReadError> {
+fn assemble(
+    path: &Path,
+    vertices: Vec<VertexLine>,
+    edges: Vec<EdgeLine>,
+    bad: &mut Invalid,
+) -> Result<PoseGraph, ReadError> {
     let keyframes: Vec<Keyframe> = if vertices.is_empty() {
-        let ids: BTreeSet<KeyframeId> = edges.iter().flat_map(|e| [e.1, e.2]).collect();
+        // a skipped self-edge does not declare its keyframe
+        let skips = bad.on_invalid == OnInvalid::Skip;
+        let ids: BTreeSet<KeyframeId> = (edges.iter())
+            .filter(|e| !(skips && e.1 == e.2))
+            .flat_map(|e| [e.1, e.2])
+            .collect();
         ids.into_iter().map(|id| Keyframe { id, guess: None }).collect()
     } else {
         let mut seen = HashSet::new();
-        for &(line, id, _) in &vertices {
-            if !seen.insert(id) {
-                return Err(ReadError::at(
-                    path,
-                    line,
-                    ReadErrorKind::Graph(GraphError::DuplicateKeyframe(id)),
-                ));
+        let mut kept = Vec::with_capacity(vertices.len());
+        for &(line, id, pose) in &vertices {
+            if seen.insert(id) {
+                kept.push(Keyframe {
+                    id,
+                    guess: Some(pose),
+                });
+            } else {
+                let e = ReadErrorKind::Graph(GraphError::DuplicateKeyframe(id));
+                bad.line(ReadError::at(path, line, e))?;
             }
         }
-        vertices
-            .iter()
-            .map(|&(_, id, pose)| Keyframe {
-                id,
-                guess: Some(pose),
-            })
-            .collect()
+        kept
     };
     let mut graph = PoseGraph::with_keyframes(keyframes).map_err(|e| ReadError::graph(path, e))?;
     for (line, i, j, m, info) in edges {
-        graph
-            .add_edge(i, j, m, info, EdgeKind::from_ids(i, j))
-            .map_err(|e| ReadError::at(path, line, ReadErrorKind::Graph(e)))?;
+        if let Err(e) = graph.add_edge(i, j, m, info, EdgeKind::from_ids(i, j)) {
+            bad.line(ReadError::at(path, line, ReadErrorKind::Graph(e)))?;
+        }
     }
     Ok(graph)
 }
@@ -277,6 +345,59 @@ mod tests {
 
         let err = parse("EDGE_SE2 0 0 1 0 0 1 0 0 1 0 1\n", Format::G2o).unwrap_err();
         assert_eq!(err.to_string(), "t.g2o:1: edge from keyframe 0 to itself");
+    }
+
+    /// What `--skip-invalid` leaves out: each line that would be refused,
+    /// with its number and reason, in file order; the rest is read.
+    #[test]
+    fn skipping_leaves_out_exactly_the_lines_that_would_be_refused() {
+        let text = "VERTEX_SE2 0 0 0 0\n\
+                    VERTEX_SE2 1 1 0 0\n\
+                    VERTEX_SE2 1 9 9 9\n\
+                    VERTEX_SE2 2 2 0 0\n\
+                    EDGE_SE2 0 1 1 0 0 1 0 0 1 0 1\n\
+                    EDGE_SE2 1 1 0 0 0 1 0 0 1 0 1\n\
+                    EDGE_SE2 1 2 1 0 0 1 0 0 -1 0 1\n\
+                    EDGE_SE2 1 2 1 0 0 1 0 0 1 0 1\n\
+                    EDGE_SE2 2 7 1 0 0 1 0 0 1 0 1\n\
+                    EDGE_SE2 0 2 2 0 0 1 0 0 1 0\n";
+        let refused = parse(text, Format::G2o).unwrap_err();
+        // refused at the first line that does not parse (the graph's own
+        // checks come after every line parsed)
+        assert_eq!(
+            refused.to_string(),
+            "t.g2o:7: EDGE_SE2: information matrix is not positive definite"
+        );
+        let (g, skipped) = parse_graph_with(Path::new("t.g2o"), text, Format::G2o, OnInvalid::Skip).unwrap();
+        let lines: Vec<String> = skipped.iter().map(|e| e.to_string()).collect();
+        assert_eq!(
+            lines,
+            [
+                "t.g2o:3: duplicate keyframe id 1",
+                "t.g2o:6: edge from keyframe 1 to itself",
+                "t.g2o:7: EDGE_SE2: information matrix is not positive definite",
+                "t.g2o:9: edge refers to unknown keyframe 7",
+                "t.g2o:10: EDGE_SE2 needs 11 fields after the tag, found 10",
+            ]
+        );
+        // the first of the repeated vertices stays; two good edges remain
+        assert_eq!(g.len(), 3);
+        assert_eq!(g.keyframes()[1].guess, Some(Pose2::new(1.0, 0.0, 0.0)));
+        assert_eq!(g.edges().len(), 2);
+        // a clean file skips nothing
+        let clean = "EDGE_SE2 0 1 1 0 0 1 0 0 1 0 1\n";
+        let (_, none) = parse_graph_with(Path::new("t.g2o"), clean, Format::G2o, OnInvalid::Skip).unwrap();
+        assert!(none.is_empty());
+    }
+
+    /// Without vertex lines, a skipped self-edge declares no keyframe.
+    #[test]
+    fn a_skipped_self_edge_declares_no_keyframe() {
+        let text = "EDGE_SE2 0 1 1 0 0 1 0 0 1 0 1\nEDGE_SE2 5 5 0 0 0 1 0 0 1 0 1\n";
+        let (g, skipped) = parse_graph_with(Path::new("t.g2o"), text, Format::G2o, OnInvalid::Skip).unwrap();
+        assert_eq!(g.len(), 2);
+        assert_eq!(skipped.len(), 1);
+        assert_eq!(skipped[0].line, Some(2));
     }
 
     #[test]

@@ -4,6 +4,7 @@ mod cli;
 mod demo;
 mod eval;
 mod gps;
+mod input;
 mod replay;
 mod robust;
 mod run;

@@ -38,13 +38,17 @@ pub struct SolveOpts {
     pub robust: bool,
     #[command(flatten)]
     pub filter: crate::robust::RobustOpts,
+    #[command(flatten)]
+    pub input: crate::input::InputOpts,
     /// Print one JSON object instead of a table.
     #[arg(long)]
     pub json: bool,
 }
 
 pub fn run(opts: SolveOpts) -> anyhow::Result<()> {
-    let mut graph = io::read_graph(&opts.file)?;
+    let input = crate::input::Input::read(&opts.file, opts.input, opts.json)?;
+    let skipped = input.json();
+    let mut graph = input.graph;
     if opts.odometry_only {
         graph = odometry_only(&graph);
     }
@@ -136,6 +140,7 @@ pub fn run(opts: SolveOpts) -> anyhow::Result<()> {
             "robust": opts.robust,
             "loop_closures": robust.loop_closures,
             "rejected_edges": sol.switches.as_ref().map(|_| &robust.rejected),
+            "skipped_lines": skipped,
         });
         println!("{v}");
     } else {

@@ -67,6 +67,8 @@ pub struct ReplayOpts {
     /// back-substitutions read, and the factor's entries after it.
     #[arg(long)]
     pub trace: Option<PathBuf>,
+    #[command(flatten)]
+    pub input: crate::input::InputOpts,
     /// Print one JSON object instead of a table.
     #[arg(long)]
     pub json: bool,
@@ -231,7 +233,9 @@ pub fn replay(
 
 pub fn run(opts: ReplayOpts) -> anyhow::Result<()> {
     let config = crate::run::load_config(opts.config.as_deref(), opts.namespace.as_deref())?;
-    let graph = io::read_graph(&opts.file)?;
+    let input = crate::input::Input::read(&opts.file, opts.input, opts.json)?;
+    let skipped = input.json();
+    let graph = input.graph;
     graph.check_connected()?;
     let truth = opts
         .ground_truth
@@ -309,6 +313,7 @@ pub fn run(opts: ReplayOpts) -> anyhow::Result<()> {
     if opts.json {
         let v = serde_json::json!({
             "file": opts.file.display().to_string(),
+            "skipped_lines": skipped,
             "mode": sink.mode(),
             "keyframes": graph.len(),
             "edges": graph.edges().len(),
