@@ -4,6 +4,7 @@ mod accuracy;
 mod cli;
 mod daemon;
 mod formulations;
+mod fuzz;
 mod gps;
 mod incremental;
 mod outliers;
