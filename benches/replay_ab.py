@@ -28,7 +28,7 @@ def main():
     ap.add_argument("after")
     ap.add_argument("files", nargs="*", default=FILES)
     ap.add_argument("--runs", type=int, default=3)
-    a = ap.parse_args()
+    a = ap.parse_intermixed_args()
     print("| file | binary | final χ² per run | total s per run | mean s | p99 ms per run |")
     print("|---|---|---|---|---|---|")
     for name in a.files:
