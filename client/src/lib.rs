@@ -28,11 +28,12 @@
 //! frontend.add_edge(&step).unwrap();
 //! frontend.flush().unwrap();
 //!
-//! // the daemon may publish after the first keyframe alone: wait for the
-//! // snapshot that holds both (`wait` gives None after 5 s of silence)
+//! // the daemon may publish before the edge has joined keyframe 1 to the
+//! // map: wait for the snapshot that holds both poses (`wait` gives None
+//! // after 5 s of silence)
 //! let snap = loop {
 //!     let snap = snapshots.wait(Duration::from_secs(5)).unwrap().expect("a snapshot");
-//!     if snap.header().keyframes == 2 {
+//!     if snap.poses().len() == 2 {
 //!         break snap;
 //!     }
 //! };

@@ -121,5 +121,9 @@ mod tests {
             check_covariance([1.0, 0.5, 0.0, 1.0]),
             Err(GpsError::NotPositiveDefinite)
         );
+        assert_eq!(
+            check_covariance([-1.0, 0.0, 0.0, 1.0]),
+            Err(GpsError::NotPositiveDefinite)
+        );
     }
 }
