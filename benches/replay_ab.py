@@ -12,7 +12,7 @@ Manhattan and City10000 from SLAMD_DATASETS (default ../shared/datasets).
 import argparse, json, os, subprocess, sys
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-DATA = os.environ.get("SLAMD_DATASETS", os.path.join(HERE, "..", "..", "shared", "datasets"))
+DATA = os.environ.get("SLAMD_DATASETS") or os.path.join(HERE, "..", "..", "shared", "datasets")
 FILES = ["manhattanolson3500_g2oversion.g2o", "city10000.g2o"]
 
 

@@ -66,8 +66,9 @@ fn random_wrong_loop_closures_are_switched_off_online() {
     }
     let spoiled = PoseGraph::from_parts(world.graph.keyframes().to_vec(), edges).unwrap();
     let (engine, sent) = replay(&spoiled, EngineConfig::default());
+    let switches = engine.switches();
     let switched_off: BTreeSet<usize> = (sent.iter().enumerate())
-        .filter(|&(n, _)| engine.switches()[n] < REJECTED_BELOW)
+        .filter(|&(n, _)| switches[n] < REJECTED_BELOW)
         .map(|(_, &e)| e)
         .collect();
     let injected: BTreeSet<usize> = (first_injected..first_injected + 60).collect();
@@ -299,12 +300,11 @@ fn unscheduled() -> EngineConfig {
 /// Replays `g`; the engine, and how many loop closures stand rejected.
 fn rejected_closures(g: &PoseGraph, config: EngineConfig) -> (Engine, usize) {
     let (engine, sent) = slamd_tests::replay(g, config, |_, _| {});
+    let switches = engine.switches();
     let off = sent
         .iter()
         .enumerate()
-        .filter(|&(n, &e)| {
-            g.edges()[e].kind == EdgeKind::LoopClosure && engine.switches()[n] < REJECTED_BELOW
-        })
+        .filter(|&(n, &e)| g.edges()[e].kind == EdgeKind::LoopClosure && switches[n] < REJECTED_BELOW)
         .count();
     (engine, off)
 }
@@ -417,7 +417,8 @@ fn loosely_held_chain(wrong: &[Pose2]) -> Vec<f64> {
     // and as they stand at the end
     let edges = engine.graph().edges();
     let closures = (0..edges.len()).filter(|&e| edges[e].kind == EdgeKind::LoopClosure);
-    switches.extend(closures.map(|e| engine.switches()[e]));
+    let at_end = engine.switches();
+    switches.extend(closures.map(|e| at_end[e]));
     switches
 }
 

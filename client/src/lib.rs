@@ -3,16 +3,18 @@
 //! With default features off, this crate links only `slamd-protocol` and
 //! `slamd-types`: a frontend that publishes to a daemon compiles no
 //! solver. The default feature `embedded` adds the in-process engine
-//! ([`Embedded`]), the daemon on a thread (`Server`) and its `Config`.
+//! (`Embedded`), the daemon on a thread (`Server`) and its `Config`.
 //!
 //! - [`Frontend`] publishes keyframes, edges and GPS fixes to a running daemon over
 //!   shared memory; [`Snapshots`] reads the daemon's pose snapshots in
 //!   place (blocking [`wait`](Snapshots::wait) or non-blocking
 //!   [`latest`](Snapshots::latest)) and its rejections.
-//! - [`Embedded`] is the same [`Publish`] API on an engine in this process,
+//! - `Embedded` is the same [`Publish`] API on an engine in this process,
 //!   for applications that embed slamd instead of talking to a daemon.
 //!
-//! ```
+//! The example runs a daemon on a thread, so it needs `embedded`:
+#![cfg_attr(feature = "embedded", doc = "```")]
+#![cfg_attr(not(feature = "embedded"), doc = "```ignore")]
 //! use slamd_client::{Config, EdgeInput, EdgeKind, Frontend, Information, Pose2, Publish, Server, Snapshots};
 //! use std::time::Duration;
 //!

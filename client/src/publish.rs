@@ -45,7 +45,7 @@ impl From<EngineError> for ClientError {
 
 /// Keyframes, edges and GPS fixes in, a new snapshot at each flush. Implemented by
 /// [`Frontend`] (a daemon over shared memory) and
-/// [`Embedded`](crate::Embedded) (an engine in this process), so a frontend
+/// `Embedded` (an engine in this process; feature `embedded`), so a frontend
 /// can be written once for both.
 ///
 /// A daemon checks what it receives asynchronously and reports refusals on

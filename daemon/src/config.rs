@@ -33,8 +33,7 @@
 //! [engine]                     # see slamd::engine::EngineConfig
 //! resolve_every_edges = 10000
 //! refresh_every_edges = 50     # relinearise between re-solves when the worker is free
-//! relinearise_ratio = 1.2      # χ² past this × its linear model's (+1): relinearise inline
-//! defer_budget = 0.0           # > 0: agreeing loop closures wait while their χ² ≤ this × the estimate's
+//! relinearise_ratio = 1.2      # χ² past this × its linear model's (+0.01): relinearise inline
 //!
 //! [engine.outliers]            # see slamd::outliers::OutlierConfig
 //! drift_run = 20               # agreeing rejections in a row that mean drift: re-solve
@@ -291,8 +290,8 @@ impl From<&Config> for slamd_protocol::Endpoint {
 mod tests {
     use super::*;
 
-    /// `SLAMD_CONFIG` (the file's path, for `--config`) was read as a
-    /// setting named `config` and refused as unknown.
+    /// `SLAMD_CONFIG` names the file (`--config`); it is not a setting
+    /// named `config`.
     #[test]
     fn the_file_variable_is_not_a_setting() {
         let env = [
@@ -304,6 +303,15 @@ mod tests {
         let unknown = [("SLAMD_NO_SUCH_SETTING".to_string(), "1".to_string())];
         let e = Config::load_with_env(None, unknown).unwrap_err().to_string();
         assert!(e.contains("no_such_setting"), "{e}");
+    }
+
+    /// An `[engine]` key that does not exist (a typo, or one that was
+    /// removed) is refused by name, as in every other section.
+    #[test]
+    fn an_unknown_engine_key_is_refused_by_name() {
+        let unknown = [("SLAMD_ENGINE__DEFER_BUDGET".to_string(), "0.1".to_string())];
+        let e = Config::load_with_env(None, unknown).unwrap_err().to_string();
+        assert!(e.contains("defer_budget"), "{e}");
     }
 
     #[test]

@@ -4,9 +4,9 @@
 
 use crate::engine::EngineError;
 use crate::geometry::Pose2;
-use crate::gps::{Georef, GpsError};
+use crate::gps::Georef;
 use crate::graph::{GraphError, KeyframeId};
-use slamd_protocol::codec::{reject, Origin};
+use slamd_protocol::codec::{gps_reason, reject, Origin};
 use slamd_protocol::{Pose, Rejection, RejectionReason, Switch};
 
 /// Keyframe `id`'s pose `p` in the map frame, with its ENU pose when the
@@ -45,9 +45,7 @@ pub fn engine_rejection(o: Origin, message: u32, ids: [u64; 2], e: &EngineError)
         EngineError::Graph(GraphError::SelfEdge(_)) => RejectionReason::SelfEdge,
         EngineError::Graph(GraphError::NonFinite(_)) => RejectionReason::NonFinite,
         EngineError::Graph(GraphError::Information(_)) => RejectionReason::NotPositiveDefinite,
-        EngineError::Gps(GpsError::NonFinite) => RejectionReason::NonFinite,
-        EngineError::Gps(GpsError::OutOfRange) => RejectionReason::OutOfRange,
-        EngineError::Gps(_) => RejectionReason::NotPositiveDefinite,
+        EngineError::Gps(e) => gps_reason(e),
         EngineError::FixKeyframe(_) => RejectionReason::UnknownKeyframe,
         _ => RejectionReason::Other,
     };

@@ -142,17 +142,22 @@ pub fn gps_in(m: &GpsFix) -> Result<(Origin, FixInput), Rejection> {
             },
         )),
         Err(e) => {
-            let reason = match e {
-                GpsError::NonFinite => RejectionReason::NonFinite,
-                GpsError::OutOfRange => RejectionReason::OutOfRange,
-                _ => RejectionReason::NotPositiveDefinite,
-            };
+            let reason = gps_reason(&e);
             let text = format!(
                 "fix on keyframe {} at ({}, {}): {e}",
                 m.keyframe, m.latitude, m.longitude
             );
             Err(reject(o, kind::GPS, reason, ids, &text))
         }
+    }
+}
+
+/// The rejection reason for a refused GPS fix.
+pub fn gps_reason(e: &GpsError) -> RejectionReason {
+    match e {
+        GpsError::NonFinite => RejectionReason::NonFinite,
+        GpsError::OutOfRange => RejectionReason::OutOfRange,
+        _ => RejectionReason::NotPositiveDefinite,
     }
 }
 

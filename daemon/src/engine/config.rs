@@ -9,7 +9,7 @@ use crate::outliers::OutlierConfig;
 /// and default; the measurements behind the defaults are in
 /// docs/benchmarks.md, "Engine defaults and why".
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct EngineConfig {
     /// Re-solve after this many new edges (0: never on count; fill, GPS,
     /// the drift and nonlinearity checks, idle time (the daemon calls

@@ -17,7 +17,7 @@
 //! newest keyframes last, a refactorisation; it then replays what arrived
 //! meanwhile and swaps in without stopping ingestion.
 //!
-//! The parts, one type each: `State` (the model, its solvers and the
+//! The parts: `State` (the model, its solvers and the
 //! estimate, and how one [`Op`] applies), `Model` with its per-edge
 //! `EdgeState`, `Solvers` (the one seam between the Gauss–Newton and the
 //! two-stage systems), `Chi2Cache`, `ArrivalGate` (the switch a new loop
@@ -86,9 +86,11 @@ use state::State;
 
 /// The incremental pose-graph solver.
 pub struct Engine {
+    /// Declared first, so dropped first: a running job is stopped before
+    /// the state it would swap in for is freed.
+    background: Background,
     state: State,
     config: EngineConfig,
-    background: Background,
     schedule: Schedule,
     version: u64,
     stats: EngineStats,
@@ -237,7 +239,7 @@ impl Engine {
 
     /// Starts a re-solve now if none is running (call when idle).
     pub fn idle(&mut self) {
-        if !self.background.running() && self.schedule.edges_since_resolve() {
+        if !self.background.running() && self.schedule.has_new_edges() {
             self.start_job(Polish::Full);
         }
     }
@@ -452,8 +454,8 @@ impl Engine {
 /// The χ² a relinearisation must gain at least: below it, a gap between
 /// the estimate and its linear model is rounding (a noise-free graph sits
 /// at χ² ~1e-20). The nonlinearity check's re-solve, dearer, waits for a
-/// gap of 1; a slack of 1 here let early snapshots (χ² of a few units)
-/// stray to 1.4-1.9× their prefix's optimum.
+/// gap of 1; a slack of 1 here would let early snapshots (χ² of a few
+/// units) stray to 1.4–1.9× their prefix's optimum.
 const RELINEARISE_SLACK: f64 = 0.01;
 
 /// Drops a replaced state on a thread of its own: freeing a factor's

@@ -64,9 +64,9 @@ pub enum SnapshotSource {
     GaussNewton,
     /// The exact two-stage solution, carried by each keyframe's correction
     /// to the last polish: `S_k = O_k ∘ L_k` with `O_k = X*_k ∘ L0_k⁻¹`.
-    /// Paper A's online formulation, selectable; its snapshots stray further
-    /// from their prefix's optimum and it is no faster, since a loop
-    /// closure's axis correction rewrites the position rows of the whole
-    /// loop (docs/design.md, "The incremental engine").
+    /// Selectable, not the default: its snapshots stray further from their
+    /// prefix's optimum and it is no faster, since a loop closure's axis
+    /// correction rewrites the position rows of the whole loop
+    /// (docs/benchmarks.md, "Measured and not kept").
     Linear,
 }

@@ -30,7 +30,7 @@ impl Schedule {
     }
 
     /// Whether edges arrived since the last re-solve.
-    pub fn edges_since_resolve(&self) -> bool {
+    pub fn has_new_edges(&self) -> bool {
         self.edges_since_resolve > 0
     }
 

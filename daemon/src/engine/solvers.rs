@@ -123,12 +123,12 @@ impl Solvers {
         Ok(())
     }
 
-    /// Adds a GPS prior to the Gauss–Newton system; false when there is
-    /// none (the two-stage system takes no priors).
-    pub fn apply_prior(&mut self, prior: &PositionPrior) -> Result<bool, UpdateError> {
+    /// Adds a GPS prior to the Gauss–Newton system, when kept (the
+    /// two-stage system takes no priors).
+    pub fn apply_prior(&mut self, prior: &PositionPrior) -> Result<(), UpdateError> {
         match &mut self.gn {
-            Some(gn) => gn.apply_prior(prior).map(|()| true),
-            None => Ok(false),
+            Some(gn) => gn.apply_prior(prior),
+            None => Ok(()),
         }
     }
 

@@ -323,7 +323,7 @@ impl State {
 
     /// Whether loop closure `edge`'s error at the estimate is within
     /// `arrival_phi` of its innovation covariance `Ω⁻¹ + σ² J Σ Jᵀ`
-    /// ([`GaussNewton::innovation_chi2`]; `σ²`: [`Self::variance_factor`]).
+    /// ([`GaussNewton::innovation_chi2`](super::gauss_newton::GaussNewton::innovation_chi2); `σ²`: [`Self::variance_factor`]).
     fn within_innovation(&mut self, edge: &Edge) -> Result<bool, EngineError> {
         let e = edge_error(edge, &self.estimate[edge.from], &self.estimate[edge.to]);
         let factor = self.variance_factor();

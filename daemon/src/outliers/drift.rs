@@ -4,8 +4,8 @@
 //! current estimate. After a long loop the estimate of `j` carries drift,
 //! so the first true loop closure is switched off, and so is every one
 //! after it: the keyframes that follow are dead-reckoned from `j`, and the
-//! off switches weigh nothing, so no update corrects them (City10000
-//! snapshots reached 10⁵ times their prefix's optimum until a re-solve).
+//! off switches weigh nothing, so no update corrects them: snapshots stray
+//! orders of magnitude from their prefix's optimum until a re-solve.
 //!
 //! What sets such a run apart is agreement. Each rejected loop closure
 //! implies a pose `x̂_j = x_i ∘ Z_ij` and so a correction of the map,

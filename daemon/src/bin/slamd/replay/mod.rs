@@ -20,10 +20,10 @@ use slamd::io;
 use slamd::solver::{solve_batch, BatchOptions};
 use std::collections::HashMap;
 use std::path::PathBuf;
+use std::time::{Duration, Instant};
 
 mod sink;
 pub use sink::{DaemonSink, EmbeddedSink, Sink};
-use std::time::{Duration, Instant};
 
 #[derive(Args, Debug)]
 pub struct ReplayOpts {

@@ -77,7 +77,7 @@ impl Sink for EmbeddedSink {
     }
 
     fn switches(&mut self) -> Option<Vec<f64>> {
-        Some(self.0.switches().to_vec())
+        Some(self.0.switches())
     }
 
     fn mode(&self) -> &'static str {
