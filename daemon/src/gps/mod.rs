@@ -144,9 +144,9 @@ impl GpsInput {
     /// `georef` goes in as the `g` of the first round (`None`: fitted to
     /// `poses`) and comes out as the fit to the poses as left. A fit that
     /// fails (fewer than two distinct positions) ends the rounds; when the
-    /// first one fails nothing changes. On a polish error, `poses` and
-    /// `georef` are those the failing round started from. Returns the
-    /// report of the last polish, `None` when no round ran.
+    /// first one fails nothing changes. On a polish error, `poses` are
+    /// those the failing round started from and `georef` the `g` it used.
+    /// Returns the report of the last polish, `None` when no round ran.
     pub fn georeference(
         &self,
         edges: &[Edge],
