@@ -8,3 +8,4 @@ mod fuzz;
 mod gps;
 mod incremental;
 mod outliers;
+mod restore;

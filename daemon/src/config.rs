@@ -30,6 +30,13 @@
 //! [gps]                        # see slamd::gps::GpsConfig
 //! # origin = "45.5138,9.2110"  # ENU origin LAT,LON[,HEIGHT]; default: the first fix
 //!
+//! [state]                      # see slamd::store::StateConfig
+//! # dir = "/var/lib/slamd"     # journal and checkpoints; none: in memory only
+//! sync = "always"              # fsync the journal per batch: always, interval, never
+//! sync_interval_ms = 100
+//! checkpoint_interval_s = 60.0
+//! checkpoint_journal_mib = 64
+//!
 //! [engine]                     # see slamd::engine::EngineConfig
 //! resolve_every_edges = 10000
 //! refresh_every_edges = 50     # relinearise between re-solves when the worker is free
@@ -43,6 +50,7 @@
 
 use crate::engine::EngineConfig;
 use crate::gps::GpsConfig;
+use crate::store::StateConfig;
 use serde::{Deserialize, Serialize};
 use slamd_protocol::service::{Qos, DEFAULT_NAMESPACE};
 use std::fmt;
@@ -143,6 +151,8 @@ pub struct Config {
     pub engine: EngineConfig,
     /// GPS fixes: ENU origin, weighting, paper A's triangle rules.
     pub gps: GpsConfig,
+    /// The state directory: journal and checkpoints.
+    pub state: StateConfig,
 }
 
 impl Default for Config {
@@ -156,6 +166,7 @@ impl Default for Config {
             snapshot: SnapshotConfig::default(),
             engine: EngineConfig::default(),
             gps: GpsConfig::default(),
+            state: StateConfig::default(),
         }
     }
 }
@@ -253,6 +264,13 @@ impl Config {
         }
         if let Err(m) = e.outliers.check() {
             return bad(format!("engine.outliers: {m}"));
+        }
+        let st = &self.state;
+        if !(st.checkpoint_interval_s.is_finite() && st.checkpoint_interval_s > 0.0) {
+            return bad(format!(
+                "state.checkpoint_interval_s {} must be > 0",
+                st.checkpoint_interval_s
+            ));
         }
         Ok(())
     }

@@ -66,5 +66,6 @@ pub mod outliers;
 pub mod robust;
 pub mod solver;
 pub mod sparse;
+pub mod store;
 pub mod synthetic;
 pub mod wire;

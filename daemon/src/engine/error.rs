@@ -23,6 +23,8 @@ pub enum EngineError {
     Gps(GpsError),
     /// A GPS fix for a keyframe that has not arrived.
     FixKeyframe(KeyframeId),
+    /// A saved map could not be taken up.
+    Restore(String),
 }
 
 impl fmt::Display for EngineError {
@@ -35,6 +37,7 @@ impl fmt::Display for EngineError {
             EngineError::Numeric(e) => write!(f, "{e}; refactorised"),
             EngineError::Gps(e) => e.fmt(f),
             EngineError::FixKeyframe(id) => write!(f, "GPS fix for unknown keyframe {id}"),
+            EngineError::Restore(e) => write!(f, "cannot restore the map: {e}"),
         }
     }
 }

@@ -300,6 +300,11 @@ impl GaussNewton {
         self.chol.residual()
     }
 
+    /// The linearisation point `lin` of every keyframe slot.
+    pub fn linearisation(&self) -> &[Pose2] {
+        &self.lin
+    }
+
     /// The current estimate of every keyframe slot.
     pub fn estimate(&self) -> &[Pose2] {
         &self.estimate

@@ -63,6 +63,7 @@ mod op;
 mod rebuild;
 mod report;
 mod resolve;
+mod restore;
 mod schedule;
 mod snapshot;
 mod solvers;
@@ -100,6 +101,8 @@ pub struct Engine {
     /// state's work when it took over.
     work_done: FactorWork,
     work_base: FactorWork,
+    /// Every fix taken, as received (what a saved map keeps).
+    fixes: Vec<FixInput>,
 }
 
 impl Engine {
@@ -114,8 +117,38 @@ impl Engine {
             frame: config.gps.origin.map(LocalFrame::new),
             work_done: FactorWork::default(),
             work_base: FactorWork::default(),
+            fixes: Vec::new(),
             config,
         }
+    }
+
+    /// An engine holding `map`: its keyframes, edges with their weights
+    /// and switches, fixes and georeference, the factor built once at the
+    /// saved estimate. The map's GPS origin wins over the configured one
+    /// (its fixes are relative to it).
+    pub fn restore(config: EngineConfig, map: &crate::store::MapFile) -> Result<Self, EngineError> {
+        let mut engine = Engine::new(config);
+        if let Some(o) = map.origin {
+            if engine.frame.is_some_and(|f| f.origin != o) {
+                tracing::warn!(?o, "The saved map has its own GPS origin; using it.");
+            }
+            engine.frame = Some(LocalFrame::new(o));
+        }
+        let state = restore::state_of(map, engine.frame, &engine.config)?;
+        engine.work_base = state.work();
+        engine.schedule.fresh(&state);
+        engine.schedule.polished(&state);
+        engine.state = state;
+        engine.fixes = map.fixes.clone();
+        engine.version = 1;
+        Ok(engine)
+    }
+
+    /// The map as it stands: keyframes, edges with their weights and
+    /// switches, the estimate, the GPS origin, fixes and georeference.
+    /// Edge origins, acknowledgements and held messages are left empty.
+    pub fn map(&self) -> crate::store::MapFile {
+        restore::map_of(&self.state, self.gps_origin(), &self.fixes)
     }
 
     /// The configuration.
@@ -149,7 +182,9 @@ impl Engine {
             keyframe: k,
             enu: c64::new(e, n),
             covariance: cov,
-        }))
+        }))?;
+        self.fixes.push(fix);
+        Ok(())
     }
 
     /// The ENU frame's origin, once known.

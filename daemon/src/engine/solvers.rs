@@ -31,6 +31,11 @@ pub struct Solvers {
 }
 
 impl Solvers {
+    /// The Gauss–Newton system's linearisation point, if it is kept.
+    pub fn linearisation(&self) -> Option<&[Pose2]> {
+        self.gn.as_ref().map(|g| g.linearisation())
+    }
+
     /// Empty systems as `config` selects.
     pub fn new(config: &EngineConfig) -> Self {
         let source = config.snapshot;

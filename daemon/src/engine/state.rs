@@ -427,6 +427,12 @@ impl State {
         &self.estimate
     }
 
+    /// Where the estimate is linearised: the Gauss–Newton system's point,
+    /// else (the linear source) the estimate itself.
+    pub fn linearisation(&self) -> &[Pose2] {
+        self.solvers.linearisation().unwrap_or(&self.estimate)
+    }
+
     /// χ² the Gauss–Newton model predicts for the current estimate, when
     /// that is the source.
     pub fn predicted_chi2(&self) -> Option<f64> {

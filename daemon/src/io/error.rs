@@ -25,6 +25,8 @@ pub enum ReadErrorKind {
     Malformed(String),
     /// The line is well formed but breaks the graph (unknown or duplicate id).
     Graph(GraphError),
+    /// A saved map that cannot be read; the text names the file.
+    Map(String),
 }
 
 impl ReadError {
@@ -55,6 +57,9 @@ impl ReadError {
 
 impl fmt::Display for ReadError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        if let ReadErrorKind::Map(m) = &self.kind {
+            return f.write_str(m);
+        }
         write!(f, "{}", self.path.display())?;
         if let Some(line) = self.line {
             write!(f, ":{line}")?;
@@ -63,6 +68,7 @@ impl fmt::Display for ReadError {
             ReadErrorKind::Io(e) => write!(f, ": {e}"),
             ReadErrorKind::Malformed(m) => write!(f, ": {m}"),
             ReadErrorKind::Graph(e) => write!(f, ": {e}"),
+            ReadErrorKind::Map(_) => Ok(()),
         }
     }
 }
@@ -72,7 +78,7 @@ impl std::error::Error for ReadError {
         match &self.kind {
             ReadErrorKind::Io(e) => Some(e),
             ReadErrorKind::Graph(e) => Some(e),
-            ReadErrorKind::Malformed(_) => None,
+            ReadErrorKind::Malformed(_) | ReadErrorKind::Map(_) => None,
         }
     }
 }

@@ -1,5 +1,5 @@
-//! Reading and writing pose graphs: g2o, TORO and iSAM files, pose tables,
-//! and SVG pictures.
+//! Reading and writing pose graphs: g2o, TORO and iSAM files (and saved
+//! maps), pose tables, and SVG pictures.
 //!
 //! Every reader reports a bad line as a [`ReadError`] naming the file, the
 //! line and the reason. A non-finite number or an information matrix that is
@@ -23,6 +23,7 @@ pub use write::{write_g2o, write_pose_table};
 
 use crate::geometry::Pose2;
 use crate::graph::{EdgeKind, GraphError, Information, Keyframe, KeyframeId, PoseGraph};
+use crate::store::MapFile;
 use std::collections::{BTreeSet, HashSet};
 use std::path::Path;
 
@@ -96,8 +97,22 @@ pub fn read_graph(path: &Path) -> Result<PoseGraph, ReadError> {
 /// Reads a graph file, detecting its format. Returns the graph and, with
 /// [`OnInvalid::Skip`], the lines left out, in file order. A file that
 /// cannot be read is an error either way.
+///
+/// A saved map (`slamd run --state`'s `map` file) is read too: its
+/// keyframes at their saved estimate and all its edges.
 pub fn read_graph_with(path: &Path, on_invalid: OnInvalid) -> Result<(PoseGraph, Vec<ReadError>), ReadError> {
-    let text = std::fs::read_to_string(path).map_err(|e| ReadError::io(path, e))?;
+    let bytes = std::fs::read(path).map_err(|e| ReadError::io(path, e))?;
+    if MapFile::sniff(&bytes) {
+        let map = MapFile::decode(path, &bytes).map_err(|e| ReadError {
+            path: path.to_owned(),
+            line: None,
+            kind: ReadErrorKind::Map(e.to_string()),
+        })?;
+        let graph = map.graph().map_err(|e| ReadError::graph(path, e))?;
+        return Ok((graph, Vec::new()));
+    }
+    let text = String::from_utf8(bytes)
+        .map_err(|e| ReadError::io(path, std::io::Error::new(std::io::ErrorKind::InvalidData, e)))?;
     let format = Format::detect(path, &text);
     parse_graph_with(path, &text, format, on_invalid)
 }

@@ -1,12 +1,15 @@
 //! The daemon's engine thread: applies each batch of messages, holds edges
-//! for missing keyframes, publishes one snapshot per batch.
+//! for missing keyframes, journals what it took and publishes one snapshot
+//! per batch (its state directory is in [`super::durable`]).
 
+use super::acks::Acks;
 use super::held::{Held, Waiting};
 use crate::config::Config;
 use crate::engine::{EdgeInput, Engine, EngineError, FixInput};
 use crate::geometry::Pose2;
 use crate::graph::{EdgeKind, GraphError, KeyframeId};
 use crate::outliers::REJECTED_BELOW;
+use crate::store::{Record, StateDir};
 use crate::wire::{self, engine_rejection};
 use crossbeam::channel::{Receiver, RecvTimeoutError};
 use slamd_protocol::codec::Origin;
@@ -47,22 +50,37 @@ pub struct Counters {
     pub fixes: u64,
     /// Messages rejected.
     pub rejected: u64,
+    /// Messages dropped as repeats of one taken before.
+    pub duplicates: u64,
 }
 
 /// The engine thread's state.
 pub struct EngineLoop {
-    engine: Engine,
+    pub(super) engine: Engine,
     outlet: Outlet,
-    held: Held<EdgeInput>,
-    held_fixes: Held<FixInput>,
-    config: Config,
-    counters: Counters,
-    acks: Vec<FrontendAck>,
+    pub(super) held: Held<EdgeInput>,
+    pub(super) held_fixes: Held<FixInput>,
+    pub(super) config: Config,
+    pub(super) counters: Counters,
+    /// What each frontend has had taken.
+    pub(super) acks: Acks,
+    /// The acknowledgements snapshots carry: of what the journal holds
+    /// (without a state directory, of what was taken).
+    pub(super) durable: [FrontendAck; MAX_FRONTENDS],
+    /// The state directory, if any.
+    pub(super) store: Option<StateDir>,
+    /// The last journal commit failed; acknowledgements wait for one that
+    /// does not.
+    pub(super) store_failed: bool,
+    /// Replaying the journal: nothing is journaled again and no rejection
+    /// is published.
+    pub(super) recovering: bool,
+    pub(super) last_checkpoint: Instant,
     dirty: bool,
     last_publish: Option<Instant>,
     last_input: Instant,
     /// Who sent each engine edge, by index.
-    edge_origin: Vec<Origin>,
+    pub(super) edge_origin: Vec<Origin>,
     /// A loop closure arrived since the switches were last published.
     new_loop_closure: bool,
 }
@@ -76,7 +94,12 @@ impl EngineLoop {
             held_fixes: Held::default(),
             config,
             counters: Counters::default(),
-            acks: Vec::with_capacity(MAX_FRONTENDS),
+            acks: Acks::default(),
+            durable: [FrontendAck::default(); MAX_FRONTENDS],
+            store: None,
+            store_failed: false,
+            recovering: false,
+            last_checkpoint: Instant::now(),
             dirty: false,
             last_publish: None,
             last_input: Instant::now(),
@@ -106,13 +129,17 @@ impl EngineLoop {
                 }
             }
             self.publish_if_due();
+            self.checkpoint_if_due();
             if !open {
                 break;
             }
         }
-        // whatever arrived last goes out
+        // whatever arrived last goes out, and into a checkpoint
         self.last_publish = None;
         self.publish_if_due();
+        if self.store.is_some() {
+            self.checkpoint();
+        }
         self.counters
     }
 
@@ -135,39 +162,17 @@ impl EngineLoop {
     /// Applies one message; `false` means stop.
     fn handle(&mut self, msg: Msg) -> bool {
         match msg {
-            Msg::Keyframe(o, id, guess) => {
-                self.last_input = Instant::now();
-                match self.engine.add_keyframe(id, guess) {
-                    Ok(_) => {
-                        self.counters.keyframes += 1;
-                        self.dirty = true;
-                        for h in self.held.release(id) {
-                            self.add_edge(h.origin, h.item, h.since);
-                        }
-                        for h in self.held_fixes.release(id) {
-                            self.add_gps(h.origin, h.item, h.since);
-                        }
-                    }
-                    Err(e) => self.reject(engine_rejection(o, kind::KEYFRAME, [id, 0], &e)),
-                }
-                self.ack(o);
-            }
-            Msg::Edge(o, edge) => {
-                self.last_input = Instant::now();
-                self.add_edge(o, edge, Instant::now());
-                self.ack(o);
-            }
-            Msg::Gps(o, fix) => {
-                self.last_input = Instant::now();
-                self.add_gps(o, fix, Instant::now());
-                self.ack(o);
-            }
+            Msg::Keyframe(o, id, guess) => self.take(Record::Keyframe(o, id, guess)),
+            Msg::Edge(o, edge) => self.take(Record::Edge(o, edge)),
+            Msg::Gps(o, fix) => self.take(Record::Fix(o, fix)),
             Msg::Rejected(r) => {
-                self.reject(r);
-                self.ack(Origin {
+                let o = Origin {
                     frontend: r.frontend,
                     sequence: r.sequence,
-                });
+                };
+                if self.admit(Record::Refused(o)) {
+                    self.reject(r);
+                }
             }
             Msg::Drained => {}
             Msg::Tick => self.tick(),
@@ -176,8 +181,53 @@ impl EngineLoop {
         true
     }
 
+    /// Takes one message in: acknowledged, journaled, applied; dropped if
+    /// it repeats one taken before.
+    fn take(&mut self, r: Record) {
+        if self.admit(r) {
+            self.last_input = Instant::now();
+            self.apply(r);
+        }
+    }
+
+    /// Records `r` as taken and journals it; false for a duplicate.
+    pub(super) fn admit(&mut self, r: Record) -> bool {
+        if !self.acks.take(r.origin()) {
+            self.counters.duplicates += 1;
+            return false;
+        }
+        if !self.recovering {
+            if let Some(store) = &mut self.store {
+                store.journal().append(&r);
+            }
+        }
+        self.dirty = true;
+        true
+    }
+
+    /// Applies a message taken in.
+    pub(super) fn apply(&mut self, r: Record) {
+        match r {
+            Record::Keyframe(o, id, guess) => match self.engine.add_keyframe(id, guess) {
+                Ok(_) => {
+                    self.counters.keyframes += 1;
+                    for h in self.held.release(id) {
+                        self.add_edge(h.origin, h.item, h.since);
+                    }
+                    for h in self.held_fixes.release(id) {
+                        self.add_gps(h.origin, h.item, h.since);
+                    }
+                }
+                Err(e) => self.reject(engine_rejection(o, kind::KEYFRAME, [id, 0], &e)),
+            },
+            Record::Edge(o, edge) => self.add_edge(o, edge, Instant::now()),
+            Record::Fix(o, fix) => self.add_gps(o, fix, Instant::now()),
+            Record::Refused(_) => {}
+        }
+    }
+
     /// Adds an edge, or holds it while one of its keyframes is missing.
-    fn add_edge(&mut self, o: Origin, edge: EdgeInput, since: Instant) {
+    pub(super) fn add_edge(&mut self, o: Origin, edge: EdgeInput, since: Instant) {
         match self.engine.add_edge(edge) {
             Ok(_) => {
                 self.counters.edges += 1;
@@ -213,7 +263,7 @@ impl EngineLoop {
 
     /// Adds a fix, or holds it while its keyframe is missing (sharing the
     /// `held_edges` cap and timeout).
-    fn add_gps(&mut self, o: Origin, fix: FixInput, since: Instant) {
+    pub(super) fn add_gps(&mut self, o: Origin, fix: FixInput, since: Instant) {
         match self.engine.add_gps(fix) {
             Ok(()) => {
                 self.counters.fixes += 1;
@@ -242,29 +292,15 @@ impl EngineLoop {
 
     fn reject(&mut self, r: Rejection) {
         self.counters.rejected += 1;
+        if self.recovering {
+            // published before the restart
+            tracing::debug!(frontend = r.frontend, sequence = r.sequence, "{}", r.text());
+            return;
+        }
         tracing::warn!(frontend = r.frontend, sequence = r.sequence, reason = ?r.reason(), "{}", r.text());
         if let Err(e) = self.outlet.reject(r) {
             tracing::error!(error = %e, "Cannot publish a rejection.");
         }
-    }
-
-    /// Records that `o` was taken in (applied, held or rejected).
-    fn ack(&mut self, o: Origin) {
-        if o.frontend == 0 {
-            return;
-        }
-        if let Some(a) = self.acks.iter_mut().find(|a| a.frontend == o.frontend) {
-            a.sequence = a.sequence.max(o.sequence);
-            return;
-        }
-        if self.acks.len() == MAX_FRONTENDS {
-            self.acks.remove(0);
-        }
-        self.acks.push(FrontendAck {
-            frontend: o.frontend,
-            reserved: 0,
-            sequence: o.sequence,
-        });
     }
 
     /// Idle work: expire waiting edges; when input has paused, let the
@@ -301,8 +337,9 @@ impl EngineLoop {
         if self.last_input.elapsed() >= tick {
             self.engine.idle();
         }
-        if self.engine.resolving() {
-            // a finished re-solve is swapped in at the next update
+        if self.engine.resolving() || self.store_failed {
+            // a finished re-solve is swapped in at the next update; a
+            // failed journal commit is tried again
             self.dirty = true;
         }
     }
@@ -316,6 +353,8 @@ impl EngineLoop {
                 return;
             }
         }
+        // what the snapshot acknowledges is on disk first
+        self.commit();
         let t0 = Instant::now();
         let report = self.engine.update();
         let solved = t0.elapsed();
@@ -338,11 +377,7 @@ impl EngineLoop {
             georeferenced: u32::from(snap.georef.is_some()),
             has_origin: u32::from(snap.origin.is_some()),
             origin: snap.origin.map_or([0.0; 3], |o| [o.lat, o.lon, o.height]),
-            acks: {
-                let mut a = [FrontendAck::default(); MAX_FRONTENDS];
-                a[..self.acks.len()].copy_from_slice(&self.acks);
-                a
-            },
+            acks: self.durable,
         };
         let georef = snap.georef;
         let poses = snap

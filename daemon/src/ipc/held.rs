@@ -61,6 +61,11 @@ impl<T: Copy> Held<T> {
         out
     }
 
+    /// Every waiting message, in no particular order.
+    pub fn waiting(&self) -> impl Iterator<Item = &Waiting<T>> {
+        self.by_missing.values().flatten()
+    }
+
     /// Removes and returns the messages that have waited longer than
     /// `limit`, with the id each waited for.
     pub fn expire(&mut self, now: Instant, limit: Duration) -> Vec<(KeyframeId, Waiting<T>)> {

@@ -10,12 +10,14 @@
 //! No iceoryx2 type appears here; the ports live in
 //! [`slamd_protocol::transport`].
 
+mod acks;
+mod durable;
 pub(crate) mod engine_loop;
 mod held;
 mod server;
 
 pub use engine_loop::Counters;
-pub use server::{serve, serve_until, ServeError, Server};
+pub use server::{serve, serve_map, serve_until, ServeError, Server};
 pub use slamd_protocol::transport::{
     SnapshotLink as Snapshots, SnapshotSample, SwitchesSample, TransportError,
 };

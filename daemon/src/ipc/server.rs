@@ -1,7 +1,10 @@
 //! [`serve`]: the daemon's main loop and its two threads.
 
+use super::durable::Start;
 use super::engine_loop::{Counters, EngineLoop, Msg};
 use crate::config::Config;
+use crate::engine::EngineError;
+use crate::store::{MapFile, StateDir, StoreError};
 use crossbeam::channel;
 use slamd_protocol::codec as wire;
 use slamd_protocol::transport::{Exit, Ingress, Input, Outlet, TransportError, Wake};
@@ -18,6 +21,12 @@ pub enum ServeError {
     Transport(TransportError),
     /// The engine thread stopped unexpectedly.
     EngineThread(String),
+    /// The state directory cannot be used.
+    State(StoreError),
+    /// The saved map cannot be taken up.
+    Restore(EngineError),
+    /// `--map` given with a state directory that already holds a map.
+    TwoMaps(std::path::PathBuf),
 }
 
 impl fmt::Display for ServeError {
@@ -25,6 +34,13 @@ impl fmt::Display for ServeError {
         match self {
             ServeError::Transport(e) => e.fmt(f),
             ServeError::EngineThread(e) => write!(f, "engine thread: {e}"),
+            ServeError::State(e) => write!(f, "state directory: {e}"),
+            ServeError::Restore(e) => e.fmt(f),
+            ServeError::TwoMaps(dir) => write!(
+                f,
+                "the state directory {} already holds a map; continue it without --map, or give an empty directory",
+                dir.display()
+            ),
         }
     }
 }
@@ -49,6 +65,17 @@ pub fn serve(config: &Config) -> Result<Counters, ServeError> {
 
 /// [`serve`], also stopping within a tick once `stop` is set.
 pub fn serve_until(config: &Config, stop: &AtomicBool) -> Result<Counters, ServeError> {
+    serve_map(config, None, stop)
+}
+
+/// [`serve_until`], continuing `map` (`slamd run --map`) when given.
+///
+/// With `state.dir` set, the directory is opened first (locked, its map
+/// and journal read, a torn journal tail cut off): a directory that cannot
+/// be written is an error here. The engine thread takes up the saved map
+/// and the journal's tail before the first snapshot.
+pub fn serve_map(config: &Config, map: Option<MapFile>, stop: &AtomicBool) -> Result<Counters, ServeError> {
+    let start = open_state(config, map)?;
     if let Some(cpu) = config.ipc.cpu {
         if !crate::affinity::reserve_current_thread(cpu) {
             tracing::warn!(cpu, "Cannot pin the IPC thread; running unpinned.");
@@ -62,7 +89,7 @@ pub fn serve_until(config: &Config, stop: &AtomicBool) -> Result<Counters, Serve
         "slamd serving."
     );
     let (tx, rx) = channel::unbounded::<Msg>();
-    let (ready_tx, ready_rx) = channel::bounded::<Result<(), TransportError>>(1);
+    let (ready_tx, ready_rx) = channel::bounded::<Result<(), ServeError>>(1);
     let engine_config = config.clone();
     let engine = std::thread::Builder::new()
         .name("slamd-engine".into())
@@ -71,13 +98,21 @@ pub fn serve_until(config: &Config, stop: &AtomicBool) -> Result<Counters, Serve
                 crate::affinity::reserve_current_thread(cpu);
             }
             // iceoryx2 ports are not Send: the outlet is opened on this thread
-            match Outlet::open(&engine_config.namespace, &engine_config.qos()) {
-                Ok(outlet) => {
+            let outlet = match Outlet::open(&engine_config.namespace, &engine_config.qos()) {
+                Ok(outlet) => outlet,
+                Err(e) => {
+                    let _ = ready_tx.send(Err(e.into()));
+                    return Counters::default();
+                }
+            };
+            let mut engine_loop = EngineLoop::new(engine_config, outlet);
+            match engine_loop.take_up(start) {
+                Ok(()) => {
                     let _ = ready_tx.send(Ok(()));
-                    EngineLoop::new(engine_config, outlet).run(rx)
+                    engine_loop.run(rx)
                 }
                 Err(e) => {
-                    let _ = ready_tx.send(Err(e));
+                    let _ = ready_tx.send(Err(ServeError::Restore(e)));
                     Counters::default()
                 }
             }
@@ -119,6 +154,28 @@ pub fn serve_until(config: &Config, stop: &AtomicBool) -> Result<Counters, Serve
     Ok(counters)
 }
 
+/// Opens the state directory, if one is configured, and decides which map
+/// the daemon continues.
+fn open_state(config: &Config, map: Option<MapFile>) -> Result<Start, ServeError> {
+    let Some(dir) = &config.state.dir else {
+        return Ok(Start {
+            map,
+            ..Start::default()
+        });
+    };
+    let (store, recovered) = StateDir::open(dir, &config.state).map_err(ServeError::State)?;
+    let saved = recovered.map.is_some() || !recovered.tail.is_empty();
+    if map.is_some() && saved {
+        return Err(ServeError::TwoMaps(dir.clone()));
+    }
+    Ok(Start {
+        store: Some(store),
+        map: recovered.map.or(map),
+        tail: recovered.tail,
+        cut: recovered.cut,
+    })
+}
+
 /// A daemon on a thread of this process: for examples, tests and
 /// applications that want the shared-memory interface without a separate
 /// process.
@@ -131,12 +188,17 @@ impl Server {
     /// Serves `config.namespace` on a new thread; returns once frontends can
     /// connect (or with the start-up error).
     pub fn spawn(config: Config) -> Result<Server, ServeError> {
+        Self::spawn_map(config, None)
+    }
+
+    /// [`Self::spawn`], continuing `map` when given.
+    pub fn spawn_map(config: Config, map: Option<MapFile>) -> Result<Server, ServeError> {
         let stop = Arc::new(AtomicBool::new(false));
         let flag = stop.clone();
         let namespace = config.namespace.clone();
         let thread = std::thread::Builder::new()
             .name("slamd-server".into())
-            .spawn(move || serve_until(&config, &flag))
+            .spawn(move || serve_map(&config, map, &flag))
             .map_err(|e| ServeError::EngineThread(e.to_string()))?;
         let server = Server {
             stop,

@@ -24,4 +24,6 @@ pub enum Command {
     Replay(crate::replay::ReplayOpts),
     /// Score a pose table on a graph: χ² and ATE, as `solve` computes them.
     Eval(crate::eval::EvalOpts),
+    /// Write a saved map (a state directory's `map`) as a g2o graph.
+    Export(crate::export::ExportOpts),
 }

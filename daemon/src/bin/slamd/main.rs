@@ -3,6 +3,7 @@
 mod cli;
 mod demo;
 mod eval;
+mod export;
 mod gps;
 mod input;
 mod replay;
@@ -23,6 +24,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         cli::Command::Solve(opts) => solve::run(opts),
         cli::Command::Eval(opts) => eval::run(opts),
+        cli::Command::Export(opts) => export::run(opts),
         cli::Command::Synth(opts) => synth::run(opts),
         cli::Command::Demo(opts) => demo::run(opts),
         cli::Command::Replay(opts) => replay::run(opts),

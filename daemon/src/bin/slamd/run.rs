@@ -3,6 +3,7 @@
 use clap::Args;
 use slamd::config::Config;
 use std::path::PathBuf;
+use std::sync::atomic::AtomicBool;
 
 #[derive(Args, Debug)]
 pub struct RunOpts {
@@ -12,6 +13,14 @@ pub struct RunOpts {
     /// Serve this namespace instead of the configured one.
     #[arg(long)]
     pub namespace: Option<String>,
+    /// Keep a journal and checkpoints here and continue what it holds
+    /// after a restart (config `state.dir`).
+    #[arg(long)]
+    pub state: Option<PathBuf>,
+    /// Start from this saved map (a state directory's `map` file) and keep
+    /// mapping in it.
+    #[arg(long)]
+    pub map: Option<PathBuf>,
 }
 
 /// Loads the configuration, with `namespace` taking precedence.
@@ -25,8 +34,12 @@ pub fn load_config(path: Option<&std::path::Path>, namespace: Option<&str>) -> a
 }
 
 pub fn run(opts: RunOpts) -> anyhow::Result<()> {
-    let config = load_config(opts.config.as_deref(), opts.namespace.as_deref())?;
+    let mut config = load_config(opts.config.as_deref(), opts.namespace.as_deref())?;
+    if let Some(dir) = opts.state {
+        config.state.dir = Some(dir);
+    }
     crate::telemetry::init(&config.log);
-    slamd::ipc::serve(&config)?;
+    let map = opts.map.as_deref().map(slamd::store::MapFile::read).transpose()?;
+    slamd::ipc::serve_map(&config, map, &AtomicBool::new(false))?;
     Ok(())
 }

@@ -1,0 +1,45 @@
+//! `slamd export MAP --out FILE.g2o`: a saved map as a g2o graph.
+
+use anyhow::Context;
+use clap::Args;
+use slamd::outliers::REJECTED_BELOW;
+use slamd::store::MapFile;
+use std::io::Write;
+use std::path::PathBuf;
+
+#[derive(Args, Debug)]
+pub struct ExportOpts {
+    /// A saved map (a state directory's `map` file).
+    pub map: PathBuf,
+    /// The g2o file to write: the saved estimate as vertices, the edges
+    /// as received.
+    #[arg(long, short)]
+    pub out: PathBuf,
+    /// Leave out the loop closures the outlier filter holds wrong.
+    #[arg(long)]
+    pub drop_rejected: bool,
+}
+
+pub fn run(opts: ExportOpts) -> anyhow::Result<()> {
+    let mut map = MapFile::read(&opts.map)?;
+    let total = map.edges.len();
+    if opts.drop_rejected {
+        map.edges.retain(|e| e.switch >= REJECTED_BELOW);
+    }
+    let graph = map.graph()?;
+    let poses: Vec<_> = map.keyframes.iter().map(|k| k.estimate).collect();
+    let file =
+        std::fs::File::create(&opts.out).with_context(|| format!("creating {}", opts.out.display()))?;
+    let mut out = std::io::BufWriter::new(file);
+    slamd::io::write_g2o(&mut out, &graph, &poses)
+        .and_then(|_| out.flush())
+        .with_context(|| format!("writing {}", opts.out.display()))?;
+    eprintln!(
+        "{}: {} keyframes, {} of {} edges",
+        opts.out.display(),
+        graph.len(),
+        graph.edges().len(),
+        total
+    );
+    Ok(())
+}

@@ -1,0 +1,189 @@
+//! [`Acks`]: which messages each frontend has had taken in, and which
+//! repeat one already taken.
+//!
+//! A frontend numbers its messages 1, 2, 3, … across keyframes, edges and
+//! fixes; the daemon drains the three queues one after another, so
+//! numbers arrive out of order within a batch. Per frontend the daemon
+//! keeps `through`, the number up to which every message was taken, and
+//! the numbers taken beyond it. The acknowledgement a snapshot carries is
+//! `through`: a frontend may forget everything up to it. A message whose
+//! number was taken already (a frontend resending after a daemon restart)
+//! is a duplicate and is dropped.
+
+use crate::store::AckState;
+use slamd_protocol::codec::Origin;
+use slamd_protocol::{FrontendAck, MAX_FRONTENDS};
+use std::collections::BTreeSet;
+
+/// Frontends remembered; beyond this the one quiet longest is forgotten.
+const TRACKED: usize = 1024;
+
+/// Numbers kept past a gap before the gap is given up as lost.
+const MAX_BEYOND: usize = 1 << 16;
+
+#[derive(Clone, Debug, Default)]
+struct Seen {
+    frontend: u32,
+    through: u64,
+    beyond: BTreeSet<u64>,
+}
+
+/// Per-frontend acknowledgements, the most recently active last.
+#[derive(Clone, Debug, Default)]
+pub struct Acks {
+    seen: Vec<Seen>,
+}
+
+impl Acks {
+    /// Restores saved acknowledgements.
+    pub fn from_saved(saved: &[AckState]) -> Self {
+        let seen = saved
+            .iter()
+            .map(|a| Seen {
+                frontend: a.frontend,
+                through: a.through,
+                beyond: a.beyond.iter().copied().collect(),
+            })
+            .collect();
+        Self { seen }
+    }
+
+    /// What a checkpoint keeps.
+    pub fn saved(&self) -> Vec<AckState> {
+        self.seen
+            .iter()
+            .map(|s| AckState {
+                frontend: s.frontend,
+                through: s.through,
+                beyond: s.beyond.iter().copied().collect(),
+            })
+            .collect()
+    }
+
+    /// Records message `o`; false if it was taken before (a duplicate).
+    /// Frontend 0 (a sender without an id) is never a duplicate. The
+    /// first message of a frontend never seen starts its count: what it
+    /// sent before went to another daemon.
+    pub fn take(&mut self, o: Origin) -> bool {
+        if o.frontend == 0 {
+            return true;
+        }
+        let at = match self.seen.iter().rposition(|s| s.frontend == o.frontend) {
+            Some(i) => i,
+            None => {
+                if self.seen.len() == TRACKED {
+                    self.seen.remove(0);
+                }
+                self.seen.push(Seen {
+                    frontend: o.frontend,
+                    through: o.sequence.saturating_sub(1),
+                    beyond: BTreeSet::new(),
+                });
+                self.seen.len() - 1
+            }
+        };
+        if at + 1 != self.seen.len() {
+            let s = self.seen.remove(at);
+            self.seen.push(s);
+        }
+        let s = self.seen.last_mut().expect("just pushed");
+        if o.sequence <= s.through || !s.beyond.insert(o.sequence) {
+            return false;
+        }
+        while s.beyond.first() == Some(&(s.through + 1)) {
+            s.beyond.pop_first();
+            s.through += 1;
+        }
+        if s.beyond.len() > MAX_BEYOND {
+            let first = s.beyond.pop_first().unwrap_or(s.through + 1);
+            tracing::warn!(
+                frontend = s.frontend,
+                missing = s.through + 1,
+                "Messages never arrived; acknowledging past them."
+            );
+            s.through = first;
+            while s.beyond.first() == Some(&(s.through + 1)) {
+                s.beyond.pop_first();
+                s.through += 1;
+            }
+        }
+        true
+    }
+
+    /// The acknowledgements a snapshot header carries: the most recently
+    /// active frontends' `through`.
+    pub fn header(&self) -> [FrontendAck; MAX_FRONTENDS] {
+        let mut out = [FrontendAck::default(); MAX_FRONTENDS];
+        let recent = self.seen.iter().rev().take(MAX_FRONTENDS);
+        for (slot, s) in out.iter_mut().zip(recent) {
+            *slot = FrontendAck {
+                frontend: s.frontend,
+                reserved: 0,
+                sequence: s.through,
+            };
+        }
+        out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn o(frontend: u32, sequence: u64) -> Origin {
+        Origin { frontend, sequence }
+    }
+
+    fn through(a: &Acks, frontend: u32) -> Option<u64> {
+        a.header()
+            .iter()
+            .find(|x| x.frontend == frontend)
+            .map(|x| x.sequence)
+    }
+
+    #[test]
+    fn out_of_order_numbers_are_acknowledged_once_the_gap_fills() {
+        let mut a = Acks::default();
+        assert!(a.take(o(5, 1)));
+        // a keyframe drained before the edge sent ahead of it
+        assert!(a.take(o(5, 3)));
+        assert_eq!(through(&a, 5), Some(1));
+        assert!(a.take(o(5, 2)));
+        assert_eq!(through(&a, 5), Some(3));
+    }
+
+    #[test]
+    fn a_resent_message_is_a_duplicate() {
+        let mut a = Acks::default();
+        for s in 1..=4 {
+            assert!(a.take(o(9, s)));
+        }
+        assert!(a.take(o(9, 6)));
+        assert!(!a.take(o(9, 2)) && !a.take(o(9, 6)));
+        assert!(a.take(o(9, 5)));
+        assert_eq!(through(&a, 9), Some(6));
+        // saved and restored, the same numbers are duplicates
+        let mut b = Acks::from_saved(&a.saved());
+        assert!(!b.take(o(9, 6)) && b.take(o(9, 7)));
+        assert!(a.take(o(0, 1)) && a.take(o(0, 1)), "no id, no duplicates");
+    }
+
+    #[test]
+    fn a_new_frontend_starts_its_count_where_it_is() {
+        let mut a = Acks::default();
+        assert!(a.take(o(3, 500)));
+        assert_eq!(through(&a, 3), Some(500));
+        assert!(!a.take(o(3, 499)));
+    }
+
+    #[test]
+    fn the_header_lists_the_most_recently_active() {
+        let mut a = Acks::default();
+        for f in 1..=(MAX_FRONTENDS as u32 + 2) {
+            a.take(o(f, 1));
+        }
+        a.take(o(1, 2));
+        assert_eq!(through(&a, 1), Some(2));
+        assert_eq!(through(&a, 2), None, "quiet longest");
+    }
+}

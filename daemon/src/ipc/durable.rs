@@ -1,0 +1,150 @@
+//! The engine thread's state directory: a journal commit before each
+//! snapshot, checkpoints, and the start from a saved map and the
+//! journal's tail.
+//!
+//! Order of a batch: the messages are applied and their records buffered;
+//! the journal is written (and fsynced as `state.sync` says); only then
+//! does the snapshot go out with the acknowledgements. A commit that fails
+//! (a full disk) leaves the acknowledgements where they were and is tried
+//! again at every tick; the records stay buffered, so nothing taken is
+//! lost while the daemon lives.
+
+use super::acks::Acks;
+use super::engine_loop::EngineLoop;
+use crate::engine::{Engine, EngineError};
+use crate::store::{Cut, MapFile, Record, StateDir};
+use std::time::{Duration, Instant};
+
+/// What the engine thread starts from.
+#[derive(Default)]
+pub struct Start {
+    /// The state directory, opened.
+    pub store: Option<StateDir>,
+    /// The map to continue: the directory's checkpoint or `--map`.
+    pub map: Option<MapFile>,
+    /// The journal's records after the map.
+    pub tail: Vec<Record>,
+    /// Where the journal was cut.
+    pub cut: Option<Cut>,
+}
+
+impl EngineLoop {
+    /// Takes up `start`: the map in one step, then the journal's tail as
+    /// one batch (applied, not journaled again, solved once by the first
+    /// snapshot).
+    pub fn take_up(&mut self, start: Start) -> Result<(), EngineError> {
+        let t0 = Instant::now();
+        self.store = start.store;
+        if let Some(cut) = &start.cut {
+            tracing::warn!(
+                offset = cut.offset,
+                reason = %cut.reason,
+                "The journal ends in a damaged record; it and what follows are cut off."
+            );
+        }
+        self.recovering = true;
+        if let Some(map) = &start.map {
+            self.restore(map)?;
+        }
+        let tail = start.tail.len();
+        for r in start.tail {
+            if self.acks.take(r.origin()) {
+                self.apply(r);
+            }
+        }
+        self.recovering = false;
+        if start.map.is_some() || tail > 0 {
+            tracing::info!(
+                keyframes = self.counters.keyframes,
+                edges = self.counters.edges,
+                journal_records = tail,
+                seconds = t0.elapsed().as_secs_f64(),
+                "Map restored."
+            );
+        }
+        // what was acknowledged before is acknowledged again at once
+        self.durable = self.acks.header();
+        Ok(())
+    }
+
+    fn restore(&mut self, map: &MapFile) -> Result<(), EngineError> {
+        self.engine = Engine::restore(self.config.engine(), map)?;
+        self.edge_origin = map.edges.iter().map(|e| e.origin).collect();
+        self.acks = Acks::from_saved(&map.acks);
+        self.counters.keyframes = map.keyframes.len() as u64;
+        self.counters.edges = map.edges.len() as u64;
+        self.counters.fixes = map.fixes.len() as u64;
+        for r in &map.held {
+            match *r {
+                Record::Edge(o, e) => self.add_edge(o, e, Instant::now()),
+                Record::Fix(o, f) => self.add_gps(o, f, Instant::now()),
+                _ => {}
+            }
+        }
+        Ok(())
+    }
+
+    /// Writes the buffered records; on success the acknowledgements
+    /// advance to what was taken.
+    pub(super) fn commit(&mut self) {
+        let Some(store) = &mut self.store else {
+            self.durable = self.acks.header();
+            return;
+        };
+        match store.journal().commit() {
+            Ok(()) => {
+                if self.store_failed {
+                    tracing::info!("The journal is written again; acknowledgements resume.");
+                }
+                self.store_failed = false;
+                self.durable = self.acks.header();
+            }
+            Err(e) => {
+                if !self.store_failed {
+                    tracing::error!(error = %e, "Cannot write the journal; acknowledgements wait.");
+                }
+                self.store_failed = true;
+            }
+        }
+    }
+
+    /// A checkpoint when the journal is large or the interval has passed
+    /// since the last one with records in between.
+    pub(super) fn checkpoint_if_due(&mut self) {
+        let Some(store) = &mut self.store else {
+            return;
+        };
+        let interval = Duration::from_secs_f64(self.config.state.checkpoint_interval_s.max(0.0));
+        let due = store.journal_full()
+            || (self.last_checkpoint.elapsed() >= interval && !store.journal().is_empty());
+        if due {
+            self.checkpoint();
+        }
+    }
+
+    /// Writes the whole map and starts a new journal.
+    pub(super) fn checkpoint(&mut self) {
+        let t0 = Instant::now();
+        let mut map = self.engine.map();
+        for (e, o) in map.edges.iter_mut().zip(&self.edge_origin) {
+            e.origin = *o;
+        }
+        map.acks = self.acks.saved();
+        map.held = (self.held.waiting())
+            .map(|h| Record::Edge(h.origin, h.item))
+            .chain(self.held_fixes.waiting().map(|h| Record::Fix(h.origin, h.item)))
+            .collect();
+        let Some(store) = &mut self.store else {
+            return;
+        };
+        self.last_checkpoint = Instant::now();
+        match store.checkpoint(map) {
+            Ok(()) => {
+                self.store_failed = false;
+                self.durable = self.acks.header();
+                tracing::debug!(seconds = t0.elapsed().as_secs_f64(), "Checkpoint written.");
+            }
+            Err(e) => tracing::error!(error = %e, "Cannot write a checkpoint; the journal goes on."),
+        }
+    }
+}

@@ -1,0 +1,241 @@
+//! The write-ahead journal: every message the daemon takes in, framed and
+//! checksummed, appended in the order the engine applied them.
+//!
+//! File: a 24-byte head `"SLAMDJNL" | version: u32 | 0: u32 | generation:
+//! u64` (the map generation it follows), then one frame per [`Record`].
+//! Records are buffered and written by [`Journal::commit`], once per batch
+//! (group commit), before the snapshot that acknowledges them goes out.
+
+use super::bytes::{frame, unframe, Framed, Put};
+use super::record::Record;
+use super::{StoreError, SyncPolicy, FORMAT_VERSION};
+use std::fs::{File, OpenOptions};
+use std::io::{Seek, SeekFrom, Write};
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+/// The journal file's first bytes.
+pub const MAGIC: &[u8; 8] = b"SLAMDJNL";
+/// Bytes before the first record.
+pub const HEAD: usize = 24;
+
+/// An open journal, appending.
+pub struct Journal {
+    file: File,
+    path: PathBuf,
+    /// Encoded records not yet written.
+    pending: Vec<u8>,
+    /// Bytes on disk that hold whole records (the head included).
+    written: u64,
+    policy: SyncPolicy,
+    interval: Duration,
+    last_sync: Instant,
+    /// Written since the last fsync.
+    unsynced: bool,
+    generation: u64,
+}
+
+/// Where a journal's readable part ended and why.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Cut {
+    /// The byte offset of the first record left out.
+    pub offset: u64,
+    /// Why it was left out.
+    pub reason: String,
+}
+
+/// What [`read`] found.
+#[derive(Debug)]
+pub struct Contents {
+    /// The map generation the journal follows.
+    pub generation: u64,
+    /// Its whole, checked records, in order.
+    pub records: Vec<Record>,
+    /// Bytes that hold them (the head included).
+    pub valid_len: u64,
+    /// Set when the file went on past them: torn or corrupt from there.
+    pub cut: Option<Cut>,
+}
+
+fn head(generation: u64) -> Vec<u8> {
+    let mut p = Put::default();
+    p.0.extend_from_slice(MAGIC);
+    p.u32(FORMAT_VERSION);
+    p.u32(0);
+    p.u64(generation);
+    p.0
+}
+
+/// Checks a file's head: magic, then format version. Returns the
+/// generation.
+pub(super) fn check_head(path: &Path, bytes: &[u8], magic: &[u8; 8], what: &str) -> Result<u64, StoreError> {
+    if bytes.len() < HEAD || &bytes[..8] != magic {
+        return Err(StoreError::NotOurs {
+            path: path.to_path_buf(),
+            what: what.into(),
+        });
+    }
+    let version = u32::from_le_bytes(bytes[8..12].try_into().unwrap_or_default());
+    if version != FORMAT_VERSION {
+        return Err(StoreError::Version {
+            path: path.to_path_buf(),
+            found: version,
+        });
+    }
+    Ok(u64::from_le_bytes(bytes[16..24].try_into().unwrap_or_default()))
+}
+
+/// Reads a journal: every record up to the first that is torn, fails its
+/// checksum or does not decode. `Ok(None)` when there is no file.
+pub fn read(path: &Path) -> Result<Option<Contents>, StoreError> {
+    let bytes = match std::fs::read(path) {
+        Ok(b) => b,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+        Err(e) => return Err(StoreError::io("read", path, e)),
+    };
+    let generation = check_head(path, &bytes, MAGIC, "journal")?;
+    let mut records = Vec::new();
+    let mut at = HEAD;
+    let mut cut = None;
+    while at < bytes.len() {
+        let reason = match unframe(&bytes[at..]) {
+            Framed::Whole(payload, used) => match Record::decode(payload) {
+                Ok(r) => {
+                    records.push(r);
+                    at += used;
+                    continue;
+                }
+                Err(e) => e.to_string(),
+            },
+            Framed::Torn => "torn (the file ends inside it)".into(),
+            Framed::Corrupt => "checksum mismatch".into(),
+        };
+        cut = Some(Cut {
+            offset: at as u64,
+            reason,
+        });
+        break;
+    }
+    Ok(Some(Contents {
+        generation,
+        records,
+        valid_len: at as u64,
+        cut,
+    }))
+}
+
+impl Journal {
+    /// A new, empty journal following map `generation`, replacing any
+    /// file at `path` atomically (written beside it, fsynced, renamed).
+    pub fn create(
+        path: &Path,
+        generation: u64,
+        policy: SyncPolicy,
+        interval: Duration,
+    ) -> Result<Self, StoreError> {
+        let tmp = path.with_extension("tmp");
+        super::write_atomically(&tmp, path, &head(generation))?;
+        Self::append_to(path, HEAD as u64, generation, policy, interval)
+    }
+
+    /// Opens an existing journal to append after its first `valid_len`
+    /// bytes; whatever follows them (a torn record) is cut off.
+    pub fn append_to(
+        path: &Path,
+        valid_len: u64,
+        generation: u64,
+        policy: SyncPolicy,
+        interval: Duration,
+    ) -> Result<Self, StoreError> {
+        let mut file = OpenOptions::new()
+            .write(true)
+            .open(path)
+            .map_err(|e| StoreError::io("open", path, e))?;
+        file.set_len(valid_len)
+            .and_then(|_| file.sync_all())
+            .and_then(|_| file.seek(SeekFrom::Start(valid_len)).map(|_| ()))
+            .map_err(|e| StoreError::io("cut", path, e))?;
+        Ok(Self {
+            file,
+            path: path.to_path_buf(),
+            pending: Vec::new(),
+            written: valid_len,
+            policy,
+            interval,
+            last_sync: Instant::now(),
+            unsynced: false,
+            generation,
+        })
+    }
+
+    /// Buffers one record for the next [`Self::commit`].
+    pub fn append(&mut self, r: &Record) {
+        let mut p = Put::default();
+        r.encode(&mut p);
+        frame(&mut self.pending, &p.0);
+    }
+
+    /// Whether records wait for [`Self::commit`].
+    pub fn has_pending(&self) -> bool {
+        !self.pending.is_empty()
+    }
+
+    /// Writes the buffered records and syncs as the policy says (always:
+    /// fsync now; interval: once the interval has passed; never: the OS
+    /// decides). On failure the file is cut back to its last whole record
+    /// and the records stay buffered for the next commit: nothing is lost
+    /// and no torn record is left between two whole ones.
+    pub fn commit(&mut self) -> Result<(), StoreError> {
+        if !self.pending.is_empty() {
+            if let Err(e) = self.file.write_all(&self.pending) {
+                let _ = self.file.set_len(self.written);
+                let _ = self.file.seek(SeekFrom::Start(self.written));
+                return Err(StoreError::io("append to", &self.path, e));
+            }
+            self.written += self.pending.len() as u64;
+            self.pending.clear();
+            self.unsynced = true;
+        }
+        let due = match self.policy {
+            SyncPolicy::Always => true,
+            SyncPolicy::Interval => self.last_sync.elapsed() >= self.interval,
+            SyncPolicy::Never => false,
+        };
+        if due {
+            self.sync()?;
+        }
+        Ok(())
+    }
+
+    /// fsyncs what was written, whatever the policy.
+    pub fn sync(&mut self) -> Result<(), StoreError> {
+        if self.unsynced {
+            self.file
+                .sync_data()
+                .map_err(|e| StoreError::io("fsync", &self.path, e))?;
+            self.unsynced = false;
+        }
+        self.last_sync = Instant::now();
+        Ok(())
+    }
+
+    /// The file was renamed to `path` (errors name it from now on).
+    pub fn moved_to(&mut self, path: &Path) {
+        self.path = path.to_path_buf();
+    }
+
+    /// Bytes written (the head included).
+    pub fn len(&self) -> u64 {
+        self.written
+    }
+
+    /// Whether it holds no record.
+    pub fn is_empty(&self) -> bool {
+        self.written <= HEAD as u64 && self.pending.is_empty()
+    }
+
+    /// The map generation it follows.
+    pub fn generation(&self) -> u64 {
+        self.generation
+    }
+}

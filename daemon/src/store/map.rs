@@ -1,0 +1,311 @@
+//! [`MapFile`]: a whole map as one versioned file, the daemon's checkpoint
+//! and what `slamd run --map` continues from.
+//!
+//! File: a 24-byte head `"SLAMDMAP" | version: u32 | 0: u32 | generation:
+//! u64`, then one frame (`len: u32 | crc32c: u32 | body`) whose body is, in
+//! order (counts are `u64`, everything little-endian):
+//!
+//! - keyframes: `id: u64, joined: u8, has_guess: u8, guess: 3 × f64,
+//!   estimate: 3 × f64, linearisation point: 3 × f64`, in arrival order
+//!   (the first is the gauge);
+//! - edges: the edge as a journal record holds it, then `scale, switch:
+//!   f64, frontend: u32, sequence: u64`;
+//! - the GPS origin: `has: u8, lat, lon, height: f64`;
+//! - the georeference: `has: u8, rotation: 2 × f64, translation: 2 × f64,
+//!   weight: f64`;
+//! - fixes: as a journal record's body;
+//! - acknowledgements: `frontend: u32, through: u64`, then the count and
+//!   the numbers taken beyond `through`;
+//! - held messages (edges and fixes waiting for their keyframe): each a
+//!   `u32` length and a journal record's payload.
+
+use super::bytes::{frame, unframe, Framed, Get, Put};
+use super::journal::{check_head, HEAD};
+use super::record::{get_edge, get_pose, put_edge, Record};
+use super::{StoreError, FORMAT_VERSION};
+use crate::gps::Georef;
+use crate::graph::{GraphError, PoseGraph};
+use faer::c64;
+use slamd_protocol::codec::Origin;
+use slamd_types::{EdgeInput, FixInput, Geodetic, KeyframeId, Pose2};
+use std::path::Path;
+
+/// The map file's first bytes.
+pub const MAGIC: &[u8; 8] = b"SLAMDMAP";
+
+/// A keyframe of a saved map.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MapKeyframe {
+    /// Its id.
+    pub id: KeyframeId,
+    /// The frontend's guess, if it gave one.
+    pub guess: Option<Pose2>,
+    /// The estimate when the map was saved.
+    pub estimate: Pose2,
+    /// Where the engine had linearised it (the estimate is one
+    /// Gauss–Newton step from there): a restored engine factorises here
+    /// and publishes the same estimate.
+    pub lin: Pose2,
+    /// Whether it was linked to the gauge.
+    pub joined: bool,
+}
+
+/// An edge of a saved map.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MapEdge {
+    /// The edge as received.
+    pub edge: EdgeInput,
+    /// Its weight as set through the engine.
+    pub scale: f64,
+    /// The outlier filter's switch.
+    pub switch: f64,
+    /// Who sent it.
+    pub origin: Origin,
+}
+
+/// One frontend's acknowledgement: every number through `through` was
+/// taken, and so were those in `beyond`.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct AckState {
+    /// The frontend.
+    pub frontend: u32,
+    /// Every message numbered up to this one was taken.
+    pub through: u64,
+    /// Messages taken past a gap.
+    pub beyond: Vec<u64>,
+}
+
+/// The map→ENU georeference and the weight of the GPS priors.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SavedGeoref {
+    /// The motion.
+    pub georef: Georef,
+    /// The weight every GPS prior carries.
+    pub weight: f64,
+}
+
+/// A whole map.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct MapFile {
+    /// Bumped by each checkpoint; the journal names the one it follows.
+    pub generation: u64,
+    /// Keyframes in arrival order.
+    pub keyframes: Vec<MapKeyframe>,
+    /// Edges in arrival order.
+    pub edges: Vec<MapEdge>,
+    /// The ENU origin of the GPS fixes.
+    pub origin: Option<Geodetic>,
+    /// The georeference of the last re-solve.
+    pub georef: Option<SavedGeoref>,
+    /// GPS fixes in arrival order.
+    pub fixes: Vec<FixInput>,
+    /// What each frontend has had acknowledged.
+    pub acks: Vec<AckState>,
+    /// Edges and fixes waiting for a keyframe.
+    pub held: Vec<Record>,
+}
+
+impl MapFile {
+    /// The file's bytes.
+    pub fn encode(&self) -> Vec<u8> {
+        let mut p = Put::default();
+        p.u64(self.keyframes.len() as u64);
+        for k in &self.keyframes {
+            p.u64(k.id);
+            p.u8(u8::from(k.joined));
+            p.u8(u8::from(k.guess.is_some()));
+            p.f64s(&k.guess.unwrap_or(Pose2::IDENTITY).to_array());
+            p.f64s(&k.estimate.to_array());
+            p.f64s(&k.lin.to_array());
+        }
+        p.u64(self.edges.len() as u64);
+        for e in &self.edges {
+            put_edge(&mut p, &e.edge);
+            p.f64(e.scale);
+            p.f64(e.switch);
+            p.u32(e.origin.frontend);
+            p.u64(e.origin.sequence);
+        }
+        p.u8(u8::from(self.origin.is_some()));
+        let o = self.origin.unwrap_or(Geodetic {
+            lat: 0.0,
+            lon: 0.0,
+            height: 0.0,
+        });
+        p.f64s(&[o.lat, o.lon, o.height]);
+        p.u8(u8::from(self.georef.is_some()));
+        let g = self.georef.map_or([0.0; 5], |s| {
+            let (r, t) = (s.georef.rotation, s.georef.translation);
+            [r.re, r.im, t.re, t.im, s.weight]
+        });
+        p.f64s(&g);
+        p.u64(self.fixes.len() as u64);
+        for f in &self.fixes {
+            p.u64(f.keyframe);
+            p.f64s(&[f.position.lat, f.position.lon, f.position.height]);
+            p.f64s(&f.covariance);
+        }
+        p.u64(self.acks.len() as u64);
+        for a in &self.acks {
+            p.u32(a.frontend);
+            p.u64(a.through);
+            p.u64(a.beyond.len() as u64);
+            for &s in &a.beyond {
+                p.u64(s);
+            }
+        }
+        p.u64(self.held.len() as u64);
+        for r in &self.held {
+            let mut q = Put::default();
+            r.encode(&mut q);
+            p.u32(q.0.len() as u32);
+            p.0.extend_from_slice(&q.0);
+        }
+        let mut out = Vec::with_capacity(HEAD + 8 + p.0.len());
+        out.extend_from_slice(MAGIC);
+        out.extend_from_slice(&FORMAT_VERSION.to_le_bytes());
+        out.extend_from_slice(&0u32.to_le_bytes());
+        out.extend_from_slice(&self.generation.to_le_bytes());
+        frame(&mut out, &p.0);
+        out
+    }
+
+    /// Reads a map file's bytes; `path` labels errors.
+    pub fn decode(path: &Path, bytes: &[u8]) -> Result<MapFile, StoreError> {
+        let generation = check_head(path, bytes, MAGIC, "map")?;
+        let body = match unframe(&bytes[HEAD..]) {
+            Framed::Whole(body, used) if HEAD + used == bytes.len() => body,
+            Framed::Whole(..) => return Err(corrupt(path, "bytes after the map")),
+            Framed::Torn => return Err(corrupt(path, "the file ends early")),
+            Framed::Corrupt => return Err(corrupt(path, "checksum mismatch")),
+        };
+        decode_body(body, generation).map_err(|e| corrupt(path, &e.to_string()))
+    }
+
+    /// Reads a map file.
+    pub fn read(path: &Path) -> Result<MapFile, StoreError> {
+        let bytes = std::fs::read(path).map_err(|e| StoreError::io("read", path, e))?;
+        Self::decode(path, &bytes)
+    }
+
+    /// The map as a pose graph: each keyframe with its saved estimate as
+    /// its guess (where it had joined), every edge as received.
+    pub fn graph(&self) -> Result<PoseGraph, GraphError> {
+        let mut g = PoseGraph::default();
+        for k in &self.keyframes {
+            g.add_keyframe(k.id, if k.joined { Some(k.estimate) } else { k.guess })?;
+        }
+        for e in &self.edges {
+            let i = &e.edge;
+            g.add_edge(i.from, i.to, i.measurement, i.information, i.kind)?;
+        }
+        Ok(g)
+    }
+
+    /// Whether `bytes` start like a map file.
+    pub fn sniff(bytes: &[u8]) -> bool {
+        bytes.starts_with(MAGIC)
+    }
+}
+
+fn corrupt(path: &Path, why: &str) -> StoreError {
+    StoreError::Corrupt {
+        path: path.to_path_buf(),
+        why: why.into(),
+    }
+}
+
+fn decode_body(body: &[u8], generation: u64) -> Result<MapFile, StoreError> {
+    let mut g = Get::new(body);
+    let mut map = MapFile {
+        generation,
+        ..MapFile::default()
+    };
+    for _ in 0..g.count(82)? {
+        let id = g.u64()?;
+        let joined = g.u8()? != 0;
+        let has_guess = g.u8()? != 0;
+        let guess = get_pose(&mut g)?;
+        let estimate = get_pose(&mut g)?;
+        let lin = get_pose(&mut g)?;
+        map.keyframes.push(MapKeyframe {
+            id,
+            guess: has_guess.then_some(guess),
+            estimate,
+            lin,
+            joined,
+        });
+    }
+    for _ in 0..g.count(101)? {
+        let edge = get_edge(&mut g)?;
+        let scale = g.f64()?;
+        let switch = g.f64()?;
+        if !(scale.is_finite() && scale >= 0.0 && (0.0..=1.0).contains(&switch)) {
+            return Err(StoreError::Malformed(format!(
+                "edge {}→{}: scale {scale}, switch {switch}",
+                edge.from, edge.to
+            )));
+        }
+        let origin = Origin {
+            frontend: g.u32()?,
+            sequence: g.u64()?,
+        };
+        map.edges.push(MapEdge {
+            edge,
+            scale,
+            switch,
+            origin,
+        });
+    }
+    let has_origin = g.u8()? != 0;
+    let [lat, lon, height] = g.f64s()?;
+    if has_origin {
+        map.origin = Some(Geodetic::new(lat, lon, height).map_err(|e| StoreError::Malformed(e.to_string()))?);
+    }
+    let has_georef = g.u8()? != 0;
+    let [rr, ri, tr, ti, weight] = g.f64s()?;
+    if has_georef {
+        if ![rr, ri, tr, ti, weight].iter().all(|v| v.is_finite()) {
+            return Err(StoreError::Malformed("georeference not finite".into()));
+        }
+        map.georef = Some(SavedGeoref {
+            georef: Georef {
+                rotation: c64::new(rr, ri),
+                translation: c64::new(tr, ti),
+            },
+            weight,
+        });
+    }
+    for _ in 0..g.count(64)? {
+        let keyframe = g.u64()?;
+        let [lat, lon, height] = g.f64s()?;
+        let covariance = g.f64s()?;
+        let position = Geodetic::new(lat, lon, height).map_err(|e| StoreError::Malformed(e.to_string()))?;
+        map.fixes.push(FixInput {
+            keyframe,
+            position,
+            covariance,
+        });
+    }
+    for _ in 0..g.count(20)? {
+        let frontend = g.u32()?;
+        let through = g.u64()?;
+        let n = g.count(8)?;
+        let beyond = (0..n).map(|_| g.u64()).collect::<Result<_, _>>()?;
+        map.acks.push(AckState {
+            frontend,
+            through,
+            beyond,
+        });
+    }
+    for _ in 0..g.count(4)? {
+        let len = g.u32()? as usize;
+        let mut bytes = Vec::with_capacity(len.min(256));
+        for _ in 0..len {
+            bytes.push(g.u8()?);
+        }
+        map.held.push(Record::decode(&bytes)?);
+    }
+    g.finish()?;
+    Ok(map)
+}

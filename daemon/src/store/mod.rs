@@ -1,0 +1,316 @@
+//! The state directory: a write-ahead journal of every message taken in
+//! and a checkpoint of the whole map, so that a daemon that dies loses
+//! nothing it acknowledged.
+//!
+//! - `journal`: [`Record`]s, each framed with its length and CRC-32C,
+//!   appended in the order the engine applied them and written once per
+//!   batch, before the snapshot that acknowledges them ([`Journal`]).
+//! - `map`: the whole map ([`MapFile`]), written beside it, fsynced and
+//!   renamed into place; each checkpoint bumps its generation and starts a
+//!   new journal that names it. A journal naming an older generation was
+//!   already folded into the map (a crash between the two renames) and is
+//!   dropped.
+//! - `lock`: held (`flock`) while a daemon uses the directory.
+//!
+//! On start, [`StateDir::open`] reads both: the journal's records up to
+//! the first torn or corrupt one (the rest is cut off, with a warning),
+//! and the map. A file of another format version is refused, never
+//! misread. The formats are in docs/daemon.md, "State directory".
+
+mod bytes;
+pub mod journal;
+pub mod map;
+pub mod record;
+
+pub use journal::{Cut, Journal};
+pub use map::{AckState, MapEdge, MapFile, MapKeyframe, SavedGeoref};
+pub use record::Record;
+
+use serde::{Deserialize, Serialize};
+use std::fmt;
+use std::fs::File;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+/// The version of the journal and map formats; any other is refused.
+pub const FORMAT_VERSION: u32 = 1;
+
+/// When the journal is fsynced.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum SyncPolicy {
+    /// After every batch, before its acknowledgement is published: an
+    /// acknowledged message survives a crash of the machine.
+    #[default]
+    Always,
+    /// At most every `sync_interval_ms`: a crash of the daemon loses
+    /// nothing acknowledged, a crash of the machine up to one interval.
+    Interval,
+    /// Never (the OS writes back): a crash of the daemon loses nothing
+    /// acknowledged, a crash of the machine can lose anything not yet
+    /// written back.
+    Never,
+}
+
+/// Why the state directory cannot be used.
+#[derive(Debug)]
+pub enum StoreError {
+    /// A file operation failed.
+    Io {
+        /// What was being done.
+        doing: &'static str,
+        /// To which file.
+        path: PathBuf,
+        /// The OS error.
+        error: std::io::Error,
+    },
+    /// The file is not a slamd journal or map.
+    NotOurs {
+        /// The file.
+        path: PathBuf,
+        /// What it should have been.
+        what: String,
+    },
+    /// The file is of another format version.
+    Version {
+        /// The file.
+        path: PathBuf,
+        /// Its version.
+        found: u32,
+    },
+    /// A map file fails its checksum or does not decode.
+    Corrupt {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong.
+        why: String,
+    },
+    /// A field does not decode (a record or a map body).
+    Malformed(String),
+    /// Another daemon holds the directory.
+    Locked(PathBuf),
+    /// The journal names a map generation the map file does not have.
+    Mismatch {
+        /// The journal's generation.
+        journal: u64,
+        /// The map's.
+        map: u64,
+    },
+}
+
+impl StoreError {
+    pub(crate) fn io(doing: &'static str, path: &Path, error: std::io::Error) -> Self {
+        StoreError::Io {
+            doing,
+            path: path.to_path_buf(),
+            error,
+        }
+    }
+}
+
+impl fmt::Display for StoreError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            StoreError::Io { doing, path, error } => write!(f, "cannot {doing} {}: {error}", path.display()),
+            StoreError::NotOurs { path, what } => write!(f, "{} is not a slamd {what} file", path.display()),
+            StoreError::Version { path, found } => write!(
+                f,
+                "{} is of format version {found}; this slamd reads version {FORMAT_VERSION}",
+                path.display()
+            ),
+            StoreError::Corrupt { path, why } => write!(f, "{} is corrupt: {why}", path.display()),
+            StoreError::Malformed(why) => write!(f, "malformed: {why}"),
+            StoreError::Locked(dir) => write!(f, "another slamd uses the state directory {}", dir.display()),
+            StoreError::Mismatch { journal, map } => write!(
+                f,
+                "the journal follows map generation {journal}, but the map is at generation {map}: \
+                 the map file is missing or was replaced"
+            ),
+        }
+    }
+}
+
+impl std::error::Error for StoreError {}
+
+/// Writes `bytes` to `tmp`, fsyncs it, renames it to `path` and fsyncs
+/// the directory: afterwards `path` holds either the old file or the new
+/// one, whole.
+pub(crate) fn write_atomically(tmp: &Path, path: &Path, bytes: &[u8]) -> Result<(), StoreError> {
+    let mut f = File::create(tmp).map_err(|e| StoreError::io("create", tmp, e))?;
+    f.write_all(bytes)
+        .and_then(|_| f.sync_all())
+        .map_err(|e| StoreError::io("write", tmp, e))?;
+    std::fs::rename(tmp, path).map_err(|e| StoreError::io("rename into", path, e))?;
+    if let Some(dir) = path.parent() {
+        let d = File::open(dir).map_err(|e| StoreError::io("open", dir, e))?;
+        d.sync_all().map_err(|e| StoreError::io("fsync", dir, e))?;
+    }
+    Ok(())
+}
+
+/// What a state directory held when it was opened.
+#[derive(Debug, Default)]
+pub struct Recovered {
+    /// The last checkpoint.
+    pub map: Option<MapFile>,
+    /// The journal's records after it.
+    pub tail: Vec<Record>,
+    /// Where the journal was cut, if it was.
+    pub cut: Option<Cut>,
+}
+
+/// How the daemon keeps its state directory.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct StateConfig {
+    /// The directory (none: the map lives in memory only).
+    pub dir: Option<PathBuf>,
+    /// When the journal is fsynced.
+    pub sync: SyncPolicy,
+    /// The interval of [`SyncPolicy::Interval`].
+    pub sync_interval_ms: u64,
+    /// A checkpoint at least this often while input arrives.
+    pub checkpoint_interval_s: f64,
+    /// A checkpoint once the journal is this large.
+    pub checkpoint_journal_mib: u64,
+}
+
+impl Default for StateConfig {
+    fn default() -> Self {
+        Self {
+            dir: None,
+            sync: SyncPolicy::Always,
+            sync_interval_ms: 100,
+            checkpoint_interval_s: 60.0,
+            checkpoint_journal_mib: 64,
+        }
+    }
+}
+
+/// An open state directory: the lock, the journal being appended to.
+pub struct StateDir {
+    dir: PathBuf,
+    journal: Journal,
+    config: StateConfig,
+    _lock: File,
+}
+
+impl StateDir {
+    /// Opens (creating) the directory, takes its lock, reads the map and
+    /// the journal, cuts a torn journal tail and opens the journal for
+    /// appending. A directory that cannot be written is an error here.
+    pub fn open(dir: &Path, config: &StateConfig) -> Result<(StateDir, Recovered), StoreError> {
+        std::fs::create_dir_all(dir).map_err(|e| StoreError::io("create", dir, e))?;
+        let lock = lock(dir)?;
+        let map_path = dir.join("map");
+        let map = match std::fs::metadata(&map_path) {
+            Ok(_) => Some(MapFile::read(&map_path)?),
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => None,
+            Err(e) => return Err(StoreError::io("read", &map_path, e)),
+        };
+        let generation = map.as_ref().map_or(0, |m| m.generation);
+        let interval = Duration::from_millis(config.sync_interval_ms);
+        let mut recovered = Recovered {
+            map,
+            ..Recovered::default()
+        };
+        // after a crash inside a checkpoint the journal that follows the
+        // map may still be called journal.next
+        let path = dir.join("journal");
+        let next = dir.join("journal.next");
+        let mut found = journal::read(&path)?;
+        if found.as_ref().is_none_or(|c| c.generation < generation) {
+            if let Ok(Some(c)) = journal::read(&next) {
+                if c.generation == generation {
+                    std::fs::rename(&next, &path).map_err(|e| StoreError::io("rename into", &path, e))?;
+                    found = Some(c);
+                }
+            }
+        }
+        let _ = std::fs::remove_file(&next);
+        let journal = match found {
+            Some(c) if c.generation == generation => {
+                recovered.tail = c.records;
+                recovered.cut = c.cut;
+                Journal::append_to(&path, c.valid_len, generation, config.sync, interval)?
+            }
+            Some(c) if c.generation > generation => {
+                return Err(StoreError::Mismatch {
+                    journal: c.generation,
+                    map: generation,
+                })
+            }
+            // missing, or already folded into the map
+            _ => Journal::create(&path, generation, config.sync, interval)?,
+        };
+        let state = StateDir {
+            dir: dir.to_path_buf(),
+            journal,
+            config: config.clone(),
+            _lock: lock,
+        };
+        Ok((state, recovered))
+    }
+
+    /// The journal.
+    pub fn journal(&mut self) -> &mut Journal {
+        &mut self.journal
+    }
+
+    /// The directory.
+    pub fn dir(&self) -> &Path {
+        &self.dir
+    }
+
+    /// Writes `map` as the next checkpoint and starts an empty journal
+    /// after it: the new journal is made first (as `journal.next`), then
+    /// the map is renamed into place, then the journal. A crash before the
+    /// map's rename leaves the old map and journal; after it, an old
+    /// journal that the next start drops (its records are in the map) and
+    /// `journal.next`, which it takes. On an error before the map's
+    /// rename nothing changed.
+    pub fn checkpoint(&mut self, mut map: MapFile) -> Result<(), StoreError> {
+        let generation = self.journal.generation() + 1;
+        map.generation = generation;
+        let interval = Duration::from_millis(self.config.sync_interval_ms);
+        let next = self.dir.join("journal.next");
+        let journal = Journal::create(&next, generation, self.config.sync, interval)?;
+        let path = self.dir.join("map");
+        if let Err(e) = write_atomically(&self.dir.join("map.tmp"), &path, &map.encode()) {
+            let _ = std::fs::remove_file(&next);
+            return Err(e);
+        }
+        self.journal = journal;
+        let path = self.dir.join("journal");
+        std::fs::rename(&next, &path).map_err(|e| StoreError::io("rename into", &path, e))?;
+        self.journal.moved_to(&path);
+        Ok(())
+    }
+
+    /// Whether the journal has grown past its checkpoint size.
+    pub fn journal_full(&self) -> bool {
+        self.journal.len() >= self.config.checkpoint_journal_mib << 20
+    }
+}
+
+/// Takes the directory's lock file, or fails if another process holds it.
+fn lock(dir: &Path) -> Result<File, StoreError> {
+    use std::os::fd::AsRawFd;
+    let path = dir.join("lock");
+    let f = std::fs::OpenOptions::new()
+        .create(true)
+        .truncate(false)
+        .write(true)
+        .open(&path)
+        .map_err(|e| StoreError::io("create", &path, e))?;
+    // SAFETY: flock on a descriptor this function owns; no memory is shared.
+    let r = unsafe { libc::flock(f.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) };
+    if r != 0 {
+        return Err(StoreError::Locked(dir.to_path_buf()));
+    }
+    Ok(f)
+}
+
+#[cfg(test)]
+mod tests;

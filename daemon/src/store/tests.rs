@@ -1,0 +1,245 @@
+use super::*;
+use crate::gps::Georef;
+use faer::c64;
+use slamd_protocol::codec::Origin;
+use slamd_types::{EdgeInput, EdgeKind, FixInput, Geodetic, Information, Pose2};
+
+fn origin(s: u64) -> Origin {
+    Origin {
+        frontend: 3,
+        sequence: s,
+    }
+}
+
+/// Keyframes 0..n with odometry between them, as a frontend sends them.
+fn stream(n: u64) -> Vec<Record> {
+    let mut out = Vec::new();
+    let mut s = 0;
+    for k in 0..n {
+        s += 1;
+        out.push(Record::Keyframe(origin(s), k, None));
+        if k > 0 {
+            s += 1;
+            let step = Pose2::new(1.0, 0.0, 0.1);
+            let e = EdgeInput::new(k - 1, k, step, Information::identity(), EdgeKind::Odometry);
+            out.push(Record::Edge(origin(s), e));
+        }
+    }
+    out
+}
+
+fn temp_dir(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("slamd-store-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    d
+}
+
+fn write_journal(dir: &Path, records: &[Record]) {
+    let (mut state, _) = StateDir::open(dir, &StateConfig::default()).unwrap();
+    for r in records {
+        state.journal().append(r);
+    }
+    state.journal().commit().unwrap();
+}
+
+#[test]
+fn the_journal_reads_back_what_was_committed() {
+    let dir = temp_dir("roundtrip");
+    let records = stream(20);
+    write_journal(&dir, &records);
+    let (_, rec) = StateDir::open(&dir, &StateConfig::default()).unwrap();
+    assert_eq!(rec.tail, records);
+    assert!(rec.cut.is_none() && rec.map.is_none());
+}
+
+/// The journal cut at every byte offset inside its last record: the
+/// daemon restarts with every record before it, the cut one is gone, and
+/// appending afterwards yields a journal that reads whole.
+#[test]
+fn a_torn_last_record_is_cut_at_every_offset_and_only_it_is_lost() {
+    let dir = temp_dir("torn");
+    let records = stream(4);
+    write_journal(&dir, &records);
+    let path = dir.join("journal");
+    let whole = std::fs::read(&path).unwrap();
+    let mut last = bytes::Put::default();
+    records[records.len() - 1].encode(&mut last);
+    let last_start = whole.len() - bytes::FRAME_HEAD - last.0.len();
+    assert!(last_start < whole.len());
+    for cut in last_start..whole.len() {
+        std::fs::write(&path, &whole[..cut]).unwrap();
+        let (mut state, rec) = StateDir::open(&dir, &StateConfig::default()).unwrap();
+        assert_eq!(rec.tail, records[..records.len() - 1], "cut at {cut}");
+        if cut > last_start {
+            assert_eq!(
+                rec.cut.as_ref().map(|c| c.offset),
+                Some(last_start as u64),
+                "cut at {cut}"
+            );
+        } else {
+            assert!(rec.cut.is_none());
+        }
+        // the torn bytes are gone: a new record follows the last whole one
+        let extra = Record::Refused(origin(99));
+        state.journal().append(&extra);
+        state.journal().commit().unwrap();
+        drop(state);
+        let (_, again) = StateDir::open(&dir, &StateConfig::default()).unwrap();
+        let mut expected = records[..records.len() - 1].to_vec();
+        expected.push(extra);
+        assert_eq!(again.tail, expected, "cut at {cut}");
+        assert!(again.cut.is_none());
+    }
+}
+
+#[test]
+fn a_corrupt_record_ends_the_journal_there() {
+    let dir = temp_dir("corrupt");
+    let records = stream(5);
+    write_journal(&dir, &records);
+    let path = dir.join("journal");
+    let mut bytes = std::fs::read(&path).unwrap();
+    let n = bytes.len();
+    bytes[n - 3] ^= 0x40;
+    std::fs::write(&path, &bytes).unwrap();
+    let (_, rec) = StateDir::open(&dir, &StateConfig::default()).unwrap();
+    assert_eq!(rec.tail, records[..records.len() - 1]);
+    assert!(rec.cut.unwrap().reason.contains("checksum"));
+}
+
+#[test]
+fn another_format_version_is_refused_not_misread() {
+    let dir = temp_dir("version");
+    write_journal(&dir, &stream(2));
+    let path = dir.join("journal");
+    let mut bytes = std::fs::read(&path).unwrap();
+    bytes[8..12].copy_from_slice(&(FORMAT_VERSION + 1).to_le_bytes());
+    std::fs::write(&path, &bytes).unwrap();
+    let err = StateDir::open(&dir, &StateConfig::default()).err().unwrap();
+    assert!(matches!(err, StoreError::Version { found, .. } if found == FORMAT_VERSION + 1));
+    assert!(err.to_string().contains("format version 2"), "{err}");
+    std::fs::write(&path, b"VERTEX_SE2 0 0 0 0\n").unwrap();
+    let err = StateDir::open(&dir, &StateConfig::default()).err().unwrap();
+    assert!(err.to_string().contains("not a slamd journal"), "{err}");
+}
+
+fn sample_map() -> MapFile {
+    let info = Information::from_upper([10.0, 1.0, 0.0, 20.0, 0.5, 30.0]).unwrap();
+    MapFile {
+        generation: 0,
+        keyframes: vec![
+            MapKeyframe {
+                id: 4,
+                guess: None,
+                estimate: Pose2::IDENTITY,
+                lin: Pose2::IDENTITY,
+                joined: true,
+            },
+            MapKeyframe {
+                id: 9,
+                guess: Some(Pose2::new(1.0, 2.0, 0.3)),
+                estimate: Pose2::new(1.1, 2.1, 0.31),
+                lin: Pose2::new(1.05, 2.05, 0.305),
+                joined: true,
+            },
+        ],
+        edges: vec![MapEdge {
+            edge: EdgeInput::new(4, 9, Pose2::new(1.0, 2.0, 0.3), info, EdgeKind::LoopClosure),
+            scale: 1.0,
+            switch: 0.25,
+            origin: origin(2),
+        }],
+        origin: Some(Geodetic::new(45.0, 9.0, 100.0).unwrap()),
+        georef: Some(SavedGeoref {
+            georef: Georef {
+                rotation: c64::new(0.6, 0.8),
+                translation: c64::new(-3.0, 4.0),
+            },
+            weight: 0.5,
+        }),
+        fixes: vec![FixInput {
+            keyframe: 9,
+            position: Geodetic::new(45.00001, 9.00001, 101.0).unwrap(),
+            covariance: [4.0, 0.0, 0.0, 4.0],
+        }],
+        acks: vec![AckState {
+            frontend: 3,
+            through: 2,
+            beyond: vec![5, 7],
+        }],
+        held: vec![Record::Edge(
+            origin(6),
+            EdgeInput::new(
+                9,
+                12,
+                Pose2::IDENTITY,
+                Information::identity(),
+                EdgeKind::Odometry,
+            ),
+        )],
+    }
+}
+
+#[test]
+fn a_map_reads_back_and_a_damaged_one_is_refused() {
+    let map = sample_map();
+    let bytes = map.encode();
+    let path = Path::new("sample.map");
+    assert_eq!(MapFile::decode(path, &bytes).unwrap(), map);
+    for cut in [0, 10, 24, 30, bytes.len() - 1] {
+        assert!(MapFile::decode(path, &bytes[..cut]).is_err(), "cut at {cut}");
+    }
+    let mut bad = bytes.clone();
+    bad[40] ^= 1;
+    let err = MapFile::decode(path, &bad).unwrap_err();
+    assert!(err.to_string().contains("checksum"), "{err}");
+}
+
+#[test]
+fn a_checkpoint_replaces_the_journal_and_a_stale_journal_is_dropped() {
+    let dir = temp_dir("checkpoint");
+    let records = stream(3);
+    write_journal(&dir, &records);
+    let old_journal = std::fs::read(dir.join("journal")).unwrap();
+    {
+        let (mut state, rec) = StateDir::open(&dir, &StateConfig::default()).unwrap();
+        assert_eq!(rec.tail.len(), records.len());
+        state.checkpoint(sample_map()).unwrap();
+        let after = Record::Refused(origin(50));
+        state.journal().append(&after);
+        state.journal().commit().unwrap();
+    }
+    let (_, rec) = StateDir::open(&dir, &StateConfig::default()).unwrap();
+    let map = rec.map.unwrap();
+    assert_eq!(map.generation, 1);
+    assert_eq!(map.keyframes, sample_map().keyframes);
+    assert_eq!(rec.tail, vec![Record::Refused(origin(50))]);
+    // a crash between the map's rename and the new journal's: the old
+    // journal, already in the map, is not replayed
+    std::fs::write(dir.join("journal"), &old_journal).unwrap();
+    let (_, rec) = StateDir::open(&dir, &StateConfig::default()).unwrap();
+    assert!(rec.tail.is_empty() && rec.map.is_some());
+    // a journal newer than its map: the map was lost
+    std::fs::remove_file(dir.join("map")).unwrap();
+    let err = StateDir::open(&dir, &StateConfig::default()).err().unwrap();
+    assert!(
+        matches!(err, StoreError::Mismatch { journal: 1, map: 0 }),
+        "{err}"
+    );
+}
+
+#[test]
+fn a_second_daemon_cannot_take_the_directory() {
+    let dir = temp_dir("lock");
+    let (_first, _) = StateDir::open(&dir, &StateConfig::default()).unwrap();
+    let err = StateDir::open(&dir, &StateConfig::default()).err().unwrap();
+    assert!(matches!(err, StoreError::Locked(_)), "{err}");
+}
+
+#[test]
+fn a_directory_that_cannot_be_written_is_refused_at_start() {
+    let err = StateDir::open(Path::new("/proc/slamd-state"), &StateConfig::default())
+        .err()
+        .unwrap();
+    assert!(err.to_string().contains("cannot create"), "{err}");
+}

@@ -1,0 +1,79 @@
+//! Saved maps: an engine restored from one holds the same map, and
+//! carries on from it to the same optimum as the engine that never
+//! stopped.
+
+use slamd::engine::{Engine, EngineConfig};
+use slamd::graph::PoseGraph;
+use slamd::store::MapFile;
+use slamd_tests::{max_pose_error, read};
+use std::path::Path;
+
+/// Inline re-solves, and every keyframe's step back-substituted (with
+/// the wildfire threshold a running engine's estimate lags its own
+/// normal equations by up to centimetres; a restored one solves them
+/// afresh).
+fn deterministic() -> EngineConfig {
+    EngineConfig {
+        background: false,
+        wildfire_threshold: 0.0,
+        ..EngineConfig::default()
+    }
+}
+
+/// Feeds keyframes `range` of `g` (each with its edges to older ones).
+fn feed(engine: &mut Engine, g: &PoseGraph, range: std::ops::Range<usize>) {
+    let groups = g.by_newer();
+    for k in range {
+        engine.add_keyframe(g.id_of(k), None).unwrap();
+        for &e in &groups[k] {
+            engine.add_edge(g.edge_input(e)).unwrap();
+        }
+        engine.update();
+    }
+}
+
+/// Manhattan saved at keyframe 1,750 and read back: the restored engine
+/// publishes the same poses, χ² and switches; fed the rest of the stream,
+/// it ends at the published optimum 146.077.
+#[test]
+fn manhattan_saved_at_1750_continues_to_the_optimum() {
+    let g = read("manhattanolson3500_g2oversion.g2o");
+    let mut first = Engine::new(deterministic());
+    feed(&mut first, &g, 0..1750);
+    let saved = first.map();
+    let bytes = saved.encode();
+    let map = MapFile::decode(Path::new("manhattan.map"), &bytes).unwrap();
+    assert_eq!(map.keyframes.len(), 1750);
+    let mut restored = Engine::restore(deterministic(), &map).unwrap();
+    restored.update();
+    let (a, b) = (first.snapshot(), restored.snapshot());
+    let pa: Vec<_> = a.poses().map(|(_, p)| p).collect();
+    let pb: Vec<_> = b.poses().map(|(_, p)| p).collect();
+    assert_eq!(pa.len(), pb.len());
+    let moved = max_pose_error(&pa, &pb);
+    assert!(moved < 1e-6, "restored poses differ by {moved:e}");
+    assert!(
+        (a.chi2 - b.chi2).abs() <= 1e-6 * a.chi2,
+        "χ² {} against {}",
+        b.chi2,
+        a.chi2
+    );
+    assert_eq!(first.switches(), restored.switches());
+
+    feed(&mut restored, &g, 1750..g.len());
+    let chi2 = restored.resolve_now().chi2;
+    assert!((chi2 - 146.077).abs() < 1e-3, "final χ² {chi2}");
+}
+
+/// A map whose edge names a keyframe it does not hold is refused with
+/// the reason, not taken up half.
+#[test]
+fn a_map_that_breaks_the_graph_is_refused() {
+    let g = read("manhattanolson3500_g2oversion.g2o");
+    let mut engine = Engine::new(deterministic());
+    feed(&mut engine, &g, 0..50);
+    let mut map = engine.map();
+    map.keyframes.truncate(40);
+    let err = Engine::restore(deterministic(), &map).err().unwrap();
+    assert!(err.to_string().contains("unknown keyframe"), "{err}");
+}
