@@ -21,8 +21,15 @@ pub struct Daemon {
 impl Daemon {
     pub fn start(name: &str, env: &[(&str, &str)]) -> Daemon {
         let namespace = format!("slamd-test-{}-{name}", std::process::id());
+        Self::serve(&namespace, &[], env)
+    }
+
+    /// `slamd run --namespace namespace` with `args`; returns once
+    /// frontends can connect.
+    pub fn serve(namespace: &str, args: &[&str], env: &[(&str, &str)]) -> Daemon {
         let mut cmd = Command::new(slamd_bin());
-        cmd.args(["run", "--namespace", &namespace])
+        cmd.args(["run", "--namespace", namespace])
+            .args(args)
             .env("SLAMD_LOG", "error")
             .stdin(Stdio::null());
         for (k, v) in env {
@@ -30,11 +37,14 @@ impl Daemon {
         }
         let child = cmd.spawn().expect("start slamd run");
         let deadline = Instant::now() + Duration::from_secs(20);
-        while Snapshots::open(&namespace).is_err() {
+        while Snapshots::open(namespace).is_err() {
             assert!(Instant::now() < deadline, "daemon `{namespace}` did not come up");
             std::thread::sleep(Duration::from_millis(20));
         }
-        Daemon { child, namespace }
+        Daemon {
+            child,
+            namespace: namespace.into(),
+        }
     }
 
     pub fn config(&self) -> Config {
@@ -44,7 +54,7 @@ impl Daemon {
         }
     }
 
-    fn signal(mut self, sig: i32) -> ExitStatus {
+    pub fn signal(mut self, sig: i32) -> ExitStatus {
         // SAFETY: kill(2) on our own child.
         unsafe { libc::kill(self.child.id() as i32, sig) };
         let status = self.child.wait().expect("wait for the daemon");

@@ -3,6 +3,7 @@
 mod accuracy;
 mod cli;
 mod daemon;
+mod durable;
 mod formulations;
 mod fuzz;
 mod gps;

@@ -22,6 +22,7 @@
 //! initial_poses = 16384        # snapshot size reserved at start (it grows)
 //! backpressure_ms = 200        # a frontend's send waits this long on a full queue
 //! tick_ms = 250                # dead-node cleanup and idle work
+//! reconnect_s = 30.0           # a frontend waits this long for a restarted daemon
 //! # cpu = 0                    # pin the IPC and engine threads (background work: other CPUs)
 //!
 //! [snapshot]
@@ -93,6 +94,8 @@ pub struct IpcConfig {
     pub backpressure_ms: u64,
     /// Period of dead-node cleanup and idle work.
     pub tick_ms: u64,
+    /// How long a frontend waits for a daemon that went away to come back.
+    pub reconnect_s: f64,
     /// Pin the daemon's IPC and engine threads to this CPU; re-solves and
     /// the freeing of retired factors then run on the other CPUs. On a
     /// small VM a wake-up across cores costs several times one on the same
@@ -112,6 +115,7 @@ impl Default for IpcConfig {
             initial_poses: q.initial_poses,
             backpressure_ms: 200,
             tick_ms: 250,
+            reconnect_s: 30.0,
             cpu: None,
         }
     }
@@ -242,6 +246,9 @@ impl Config {
         if i.tick_ms == 0 {
             return bad("ipc.tick_ms must be at least 1".into());
         }
+        if !(i.reconnect_s.is_finite() && i.reconnect_s >= 0.0) {
+            return bad(format!("ipc.reconnect_s {} must be a number ≥ 0", i.reconnect_s));
+        }
         if !self.snapshot.max_rate_hz.is_finite() || self.snapshot.max_rate_hz < 0.0 {
             return bad(format!(
                 "snapshot.max_rate_hz {} must be a number ≥ 0",
@@ -300,6 +307,7 @@ impl From<&Config> for slamd_protocol::Endpoint {
         slamd_protocol::Endpoint {
             namespace: c.namespace.clone(),
             backpressure: c.backpressure(),
+            reconnect: Duration::from_secs_f64(c.ipc.reconnect_s),
         }
     }
 }

@@ -320,7 +320,7 @@ mod tests {
             (
                 |e| e.protocol = 99,
                 RejectionReason::ProtocolVersion,
-                "message speaks protocol 99, the daemon 2",
+                "message speaks protocol 99, the daemon 3",
             ),
         ];
         for (break_it, reason, text) in cases {

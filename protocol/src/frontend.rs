@@ -1,48 +1,112 @@
-//! [`Frontend`]: publishing keyframes, edges and GPS fixes to a running daemon.
+//! [`Frontend`]: publishing keyframes, edges and GPS fixes to a running
+//! daemon, riding out its restarts.
+//!
+//! Every message gets the next number. The frontend keeps each message
+//! until the daemon acknowledges it (the daemon's acknowledgement of a
+//! number covers every message up to it). Each daemon start has its own
+//! instance number; when the frontend sees a new one it sends again every
+//! message the new daemon has not acknowledged, and the daemon drops the
+//! ones it already had. A send that finds the daemon gone (its queue full
+//! past the backpressure timeout) waits for a daemon to come back, up to
+//! the reconnect bound, then fails with [`TransportError::DaemonGone`].
 
 use crate::codec::{edge_out, gps_out, keyframe_out, Origin};
+use crate::message::{Edge, GpsFix, Keyframe};
 use crate::transport::{FrontendLink, TransportError};
 use slamd_types::{EdgeInput, FixInput, KeyframeId, Pose2};
+use std::collections::VecDeque;
 use std::sync::atomic::{AtomicU32, Ordering};
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
-/// Where a frontend connects: the daemon's namespace, and how long a send
-/// that finds the daemon's queue full retries before it fails.
+/// Where a frontend connects: the daemon's namespace, how long a send that
+/// finds the daemon's queue full retries, and how long it waits for a
+/// daemon that went away to come back.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct Endpoint {
     /// The daemon's namespace (`slamd run --namespace`).
     pub namespace: String,
     /// The send timeout on a full queue.
     pub backpressure: Duration,
+    /// How long to wait for a daemon to come back.
+    pub reconnect: Duration,
 }
+
+impl Endpoint {
+    /// `namespace` with a 200 ms backpressure timeout and a 30 s
+    /// reconnect bound.
+    pub fn new(namespace: &str) -> Self {
+        Self {
+            namespace: namespace.into(),
+            backpressure: Duration::from_millis(200),
+            reconnect: Duration::from_secs(30),
+        }
+    }
+}
+
+/// Messages kept for sending again at most; past it the oldest are
+/// forgotten (a daemon that never acknowledges this frontend).
+const OUTBOX_LIMIT: usize = 1 << 20;
+
+/// Messages between two looks at the acknowledgements, when the caller
+/// does not flush.
+const PRUNE_EVERY: usize = 1024;
+
+/// How often a frontend waiting for a daemon looks again.
+const POLL: Duration = Duration::from_millis(10);
 
 static NEXT: AtomicU32 = AtomicU32::new(1);
 
+/// One message as sent.
+#[derive(Clone, Copy, Debug)]
+enum Outgoing {
+    Keyframe(Keyframe),
+    Edge(Edge),
+    Gps(GpsFix),
+}
+
 /// A frontend's connection: each message gets the next number; the daemon
-/// acknowledges numbers in snapshot headers and names them in rejections.
+/// acknowledges numbers and names them in rejections.
 pub struct Frontend {
     link: FrontendLink,
+    endpoint: Endpoint,
     id: u32,
     sequence: u64,
+    /// Messages not yet acknowledged, oldest first.
+    outbox: VecDeque<(u64, Outgoing)>,
+    /// The daemon instance last heard from (0: none yet).
+    instance: u64,
+    /// The daemon's acknowledgement of this frontend.
+    acked: u64,
+    /// Sends again after a daemon restart.
+    resent: u64,
 }
 
 impl Frontend {
     /// Connects to the daemon at `endpoint` (for example a daemon's
-    /// configuration: its namespace and backpressure).
+    /// configuration: its namespace, backpressure and reconnect bound).
     pub fn connect(endpoint: impl Into<Endpoint>) -> Result<Self, TransportError> {
-        let e = endpoint.into();
-        Self::connect_to(&e.namespace, e.backpressure)
+        let endpoint = endpoint.into();
+        let link = FrontendLink::open(&endpoint.namespace, endpoint.backpressure)?;
+        // nonzero and distinct across processes and connections
+        let id = (std::process::id().wrapping_mul(2654435761) ^ NEXT.fetch_add(1, Ordering::Relaxed)).max(1);
+        let instance = link.latest_acks()?.map_or(0, |a| a.instance);
+        Ok(Self {
+            link,
+            endpoint,
+            id,
+            sequence: 0,
+            outbox: VecDeque::new(),
+            instance,
+            acked: 0,
+            resent: 0,
+        })
     }
 
     /// Connects to the daemon serving `namespace`.
     pub fn connect_to(namespace: &str, backpressure: Duration) -> Result<Self, TransportError> {
-        let link = FrontendLink::open(namespace, backpressure)?;
-        // nonzero and distinct across processes and connections
-        let id = (std::process::id().wrapping_mul(2654435761) ^ NEXT.fetch_add(1, Ordering::Relaxed)).max(1);
-        Ok(Self {
-            link,
-            id,
-            sequence: 0,
+        Self::connect(Endpoint {
+            backpressure,
+            ..Endpoint::new(namespace)
         })
     }
 
@@ -56,12 +120,19 @@ impl Frontend {
         self.sequence
     }
 
-    fn next(&mut self) -> Origin {
-        self.sequence += 1;
-        Origin {
-            frontend: self.id,
-            sequence: self.sequence,
-        }
+    /// The number through which the daemon has acknowledged every message.
+    pub fn acknowledged(&self) -> u64 {
+        self.acked
+    }
+
+    /// Messages kept until the daemon acknowledges them.
+    pub fn unacknowledged(&self) -> usize {
+        self.outbox.len()
+    }
+
+    /// Messages sent again to a restarted daemon so far.
+    pub fn resent(&self) -> u64 {
+        self.resent
     }
 
     /// Publishes a keyframe; returns its message number.
@@ -72,36 +143,155 @@ impl Frontend {
         guess: Option<Pose2>,
     ) -> Result<u64, TransportError> {
         let o = self.next();
-        self.link
-            .send_keyframe(keyframe_out(id, timestamp_ns, guess, o))?;
-        Ok(o.sequence)
+        self.send(Outgoing::Keyframe(keyframe_out(id, timestamp_ns, guess, o)))
     }
 
     /// Publishes an edge; returns its message number.
     pub fn add_edge(&mut self, edge: &EdgeInput) -> Result<u64, TransportError> {
         let o = self.next();
-        self.link.send_edge(edge_out(edge, o))?;
-        Ok(o.sequence)
+        self.send(Outgoing::Edge(edge_out(edge, o)))
     }
 
     /// Publishes a GPS fix; returns its message number.
     pub fn add_gps(&mut self, fix: &FixInput) -> Result<u64, TransportError> {
         let o = self.next();
-        self.link.send_gps(gps_out(fix, o))?;
-        Ok(o.sequence)
+        self.send(Outgoing::Gps(gps_out(fix, o)))
     }
 
     /// Publishes a raw edge message as is (tests of hostile input).
-    pub fn send_raw_edge(&mut self, mut m: crate::Edge) -> Result<u64, TransportError> {
+    pub fn send_raw_edge(&mut self, mut m: Edge) -> Result<u64, TransportError> {
         let o = self.next();
         m.frontend = o.frontend;
         m.sequence = o.sequence;
-        self.link.send_edge(m)?;
-        Ok(o.sequence)
+        self.send(Outgoing::Edge(m))
     }
 
     /// Wakes the daemon to take everything published so far.
-    pub fn flush(&self) -> Result<(), TransportError> {
+    pub fn flush(&mut self) -> Result<(), TransportError> {
+        self.poll()?;
         self.link.poke()
+    }
+
+    /// Reads the daemon's latest acknowledgements: forgets what they
+    /// cover and, if a new daemon is serving, sends it again whatever it
+    /// has not acknowledged. Never blocks for long (a send may wait for
+    /// backpressure).
+    pub fn poll(&mut self) -> Result<(), TransportError> {
+        let Some(a) = self.link.latest_acks()? else {
+            return Ok(());
+        };
+        let acked = a.ack_of(self.id).unwrap_or(0);
+        self.forget_through(acked);
+        if a.instance != self.instance {
+            let first = self.instance == 0;
+            self.instance = a.instance;
+            self.acked = acked;
+            if !first {
+                self.send_again()?;
+            }
+        }
+        Ok(())
+    }
+
+    /// Waits until the daemon has acknowledged message `sequence`, riding
+    /// out daemon restarts; `false` if `timeout` passed first.
+    pub fn wait_acknowledged(&mut self, sequence: u64, timeout: Duration) -> Result<bool, TransportError> {
+        let deadline = Instant::now() + timeout;
+        loop {
+            self.poll()?;
+            if self.acked >= sequence {
+                return Ok(true);
+            }
+            if Instant::now() >= deadline {
+                return Ok(false);
+            }
+            std::thread::sleep(POLL.min(deadline.saturating_duration_since(Instant::now())));
+        }
+    }
+
+    fn next(&mut self) -> Origin {
+        self.sequence += 1;
+        Origin {
+            frontend: self.id,
+            sequence: self.sequence,
+        }
+    }
+
+    fn forget_through(&mut self, acked: u64) {
+        self.acked = self.acked.max(acked);
+        while self.outbox.front().is_some_and(|(s, _)| *s <= acked) {
+            self.outbox.pop_front();
+        }
+    }
+
+    /// Keeps `m` until acknowledged and publishes it; a daemon gone means
+    /// waiting for the next one.
+    fn send(&mut self, m: Outgoing) -> Result<u64, TransportError> {
+        let sequence = self.sequence;
+        if self.outbox.len() == OUTBOX_LIMIT {
+            self.outbox.pop_front();
+        }
+        self.outbox.push_back((sequence, m));
+        if self.outbox.len() % PRUNE_EVERY == 0 {
+            // between flushes, still forget what was acknowledged
+            let before = self.instance;
+            self.poll()?;
+            if self.instance != before {
+                // sent again with the rest
+                return Ok(sequence);
+            }
+        }
+        match self.publish(&m) {
+            Ok(()) => Ok(sequence),
+            Err(TransportError::Backpressure { .. }) => {
+                self.await_daemon()?;
+                Ok(sequence)
+            }
+            Err(e) => Err(e),
+        }
+    }
+
+    fn publish(&self, m: &Outgoing) -> Result<(), TransportError> {
+        match *m {
+            Outgoing::Keyframe(k) => self.link.send_keyframe(k),
+            Outgoing::Edge(e) => self.link.send_edge(e),
+            Outgoing::Gps(g) => self.link.send_gps(g),
+        }
+    }
+
+    /// Sends every kept message again, oldest first, and wakes the daemon.
+    fn send_again(&mut self) -> Result<(), TransportError> {
+        for i in 0..self.outbox.len() {
+            let m = self.outbox[i].1;
+            self.publish(&m)?;
+            self.resent += 1;
+        }
+        self.link.poke()
+    }
+
+    /// The daemon's queue stayed full: it is gone or stuck. Waits for a
+    /// new daemon (then everything kept went to it) or for the queue to
+    /// take the newest message, up to the reconnect bound.
+    fn await_daemon(&mut self) -> Result<(), TransportError> {
+        let started = Instant::now();
+        let before = self.instance;
+        let _ = self.link.poke();
+        while started.elapsed() < self.endpoint.reconnect {
+            std::thread::sleep(POLL);
+            self.poll()?;
+            if self.instance != before {
+                return Ok(());
+            }
+            let newest = self.outbox.back().map(|(_, m)| *m);
+            match newest.map(|m| self.publish(&m)) {
+                Some(Ok(())) | None => return Ok(()),
+                Some(Err(TransportError::Backpressure { .. })) => {}
+                Some(Err(e)) => return Err(e),
+            }
+        }
+        Err(TransportError::DaemonGone {
+            namespace: self.endpoint.namespace.clone(),
+            waited_s: started.elapsed().as_secs_f64(),
+        })
     }
 }

@@ -11,7 +11,7 @@
 use iceoryx2::prelude::*;
 
 /// The layout version of every message below. Bump it on any change.
-pub const PROTOCOL_VERSION: u32 = 2;
+pub const PROTOCOL_VERSION: u32 = 3;
 
 /// Frontends whose progress a snapshot header reports.
 pub const MAX_FRONTENDS: usize = 8;
@@ -187,9 +187,37 @@ pub struct FrontendAck {
     pub frontend: u32,
     /// Zero.
     pub reserved: u32,
-    /// Its highest message number the snapshot has taken in (applied,
-    /// held for a missing keyframe, or rejected).
+    /// Every message of this frontend numbered up to here was taken in
+    /// (applied, held for a missing keyframe, or rejected) and, with a
+    /// state directory, is on disk.
     pub sequence: u64,
+}
+
+/// The daemon's acknowledgements, daemon → frontends, published with every
+/// snapshot: which daemon is serving, and how far each of the most recent
+/// frontends has got.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
+#[type_name("slamd::Acknowledgements")]
+pub struct Acknowledgements {
+    /// [`PROTOCOL_VERSION`] of the daemon.
+    pub protocol: u32,
+    /// Zero.
+    pub reserved: u32,
+    /// Differs for every start of a daemon: a frontend that sees it change
+    /// sends again what the new daemon has not acknowledged.
+    pub instance: u64,
+    /// Progress of the most recent frontends.
+    pub acks: [FrontendAck; MAX_FRONTENDS],
+}
+
+impl Acknowledgements {
+    /// How far `frontend` has got, if it is listed.
+    pub fn ack_of(&self, frontend: u32) -> Option<u64> {
+        (self.acks.iter())
+            .find(|a| a.frontend == frontend && frontend != 0)
+            .map(|a| a.sequence)
+    }
 }
 
 /// The header of a pose snapshot; the payload is `poses` [`Pose`]s.
@@ -234,7 +262,7 @@ pub struct SnapshotHeader {
 }
 
 impl SnapshotHeader {
-    /// The highest message number of `frontend` this snapshot took in.
+    /// The number through which every message of `frontend` was taken in.
     pub fn ack_of(&self, frontend: u32) -> Option<u64> {
         self.acks
             .iter()

@@ -9,6 +9,11 @@
 //! `through`: a frontend may forget everything up to it. A message whose
 //! number was taken already (a frontend resending after a daemon restart)
 //! is a duplicate and is dropped.
+//!
+//! A frontend met for the first time may be one that talked to an earlier
+//! daemon (without a state directory) and now sends again what that one
+//! never acknowledged: its count starts at the lowest number of the first
+//! batch it appears in, not at 1.
 
 use crate::store::AckState;
 use slamd_protocol::codec::Origin;
@@ -26,6 +31,8 @@ struct Seen {
     frontend: u32,
     through: u64,
     beyond: BTreeSet<u64>,
+    /// Until its first batch ends: the lowest number taken.
+    floor: Option<u64>,
 }
 
 /// Per-frontend acknowledgements, the most recently active last.
@@ -43,6 +50,7 @@ impl Acks {
                 frontend: a.frontend,
                 through: a.through,
                 beyond: a.beyond.iter().copied().collect(),
+                floor: None,
             })
             .collect();
         Self { seen }
@@ -61,9 +69,9 @@ impl Acks {
     }
 
     /// Records message `o`; false if it was taken before (a duplicate).
-    /// Frontend 0 (a sender without an id) is never a duplicate. The
-    /// first message of a frontend never seen starts its count: what it
-    /// sent before went to another daemon.
+    /// Frontend 0 (a sender without an id) is never a duplicate. For a
+    /// frontend never seen, the lowest number of its first batch starts
+    /// its count: what it sent before went to another daemon.
     pub fn take(&mut self, o: Origin) -> bool {
         if o.frontend == 0 {
             return true;
@@ -78,6 +86,7 @@ impl Acks {
                     frontend: o.frontend,
                     through: o.sequence.saturating_sub(1),
                     beyond: BTreeSet::new(),
+                    floor: Some(o.sequence),
                 });
                 self.seen.len() - 1
             }
@@ -87,6 +96,12 @@ impl Acks {
             self.seen.push(s);
         }
         let s = self.seen.last_mut().expect("just pushed");
+        if let Some(floor) = s.floor.filter(|&f| o.sequence < f) {
+            // below the first batch's start so far: the count starts lower
+            s.beyond.extend(floor..=s.through);
+            s.through = o.sequence - 1;
+            s.floor = Some(o.sequence);
+        }
         if o.sequence <= s.through || !s.beyond.insert(o.sequence) {
             return false;
         }
@@ -108,6 +123,13 @@ impl Acks {
             }
         }
         true
+    }
+
+    /// Ends every frontend's first batch.
+    pub fn seal(&mut self) {
+        for s in &mut self.seen {
+            s.floor = None;
+        }
     }
 
     /// The acknowledgements a snapshot header carries: the most recently
@@ -169,11 +191,21 @@ mod tests {
     }
 
     #[test]
-    fn a_new_frontend_starts_its_count_where_it_is() {
+    fn a_new_frontend_starts_its_count_at_its_first_batch() {
         let mut a = Acks::default();
+        // sent again after a restart: keyframes drained before edges
+        assert!(a.take(o(3, 501)));
+        assert!(a.take(o(3, 503)));
         assert!(a.take(o(3, 500)));
-        assert_eq!(through(&a, 3), Some(500));
+        assert!(!a.take(o(3, 501)));
+        assert_eq!(through(&a, 3), Some(501));
+        assert!(a.take(o(3, 502)));
+        assert_eq!(through(&a, 3), Some(503));
+        a.seal();
+        // after its first batch, a lower number is a duplicate
         assert!(!a.take(o(3, 499)));
+        assert!(a.take(o(3, 505)));
+        assert_eq!(through(&a, 3), Some(503), "504 is missing");
     }
 
     #[test]

@@ -52,6 +52,7 @@ impl EngineLoop {
                 self.apply(r);
             }
         }
+        self.acks.seal();
         self.recovering = false;
         if start.map.is_some() || tail > 0 {
             tracing::info!(

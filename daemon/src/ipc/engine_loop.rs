@@ -16,7 +16,8 @@ use slamd_protocol::codec::Origin;
 use slamd_protocol::message::kind;
 use slamd_protocol::transport::{Outlet, TransportError};
 use slamd_protocol::{
-    FrontendAck, Rejection, RejectionReason, SnapshotHeader, SwitchesHeader, MAX_FRONTENDS, PROTOCOL_VERSION,
+    Acknowledgements, FrontendAck, Rejection, RejectionReason, SnapshotHeader, SwitchesHeader, MAX_FRONTENDS,
+    PROTOCOL_VERSION,
 };
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
@@ -76,6 +77,8 @@ pub struct EngineLoop {
     /// is published.
     pub(super) recovering: bool,
     pub(super) last_checkpoint: Instant,
+    /// This daemon start's number in the acknowledgements.
+    instance: u64,
     dirty: bool,
     last_publish: Option<Instant>,
     last_input: Instant,
@@ -100,6 +103,7 @@ impl EngineLoop {
             store_failed: false,
             recovering: false,
             last_checkpoint: Instant::now(),
+            instance: new_instance(),
             dirty: false,
             last_publish: None,
             last_input: Instant::now(),
@@ -112,6 +116,8 @@ impl EngineLoop {
     /// applies every message already queued, then publishes once.
     pub fn run(mut self, rx: Receiver<Msg>) -> Counters {
         let tick = Duration::from_millis(self.config.ipc.tick_ms);
+        // frontends learn at once that this daemon serves them
+        self.publish_acks();
         loop {
             let first = match rx.recv_timeout(self.wait_time(tick)) {
                 Ok(m) => m,
@@ -174,7 +180,7 @@ impl EngineLoop {
                     self.reject(r);
                 }
             }
-            Msg::Drained => {}
+            Msg::Drained => self.acks.seal(),
             Msg::Tick => self.tick(),
             Msg::Shutdown => return false,
         }
@@ -355,6 +361,7 @@ impl EngineLoop {
         }
         // what the snapshot acknowledges is on disk first
         self.commit();
+        self.publish_acks();
         let t0 = Instant::now();
         let report = self.engine.update();
         let solved = t0.elapsed();
@@ -402,6 +409,18 @@ impl EngineLoop {
         self.last_publish = Some(Instant::now());
     }
 
+    fn publish_acks(&mut self) {
+        let m = Acknowledgements {
+            protocol: PROTOCOL_VERSION,
+            reserved: 0,
+            instance: self.instance,
+            acks: self.durable,
+        };
+        if let Err(e) = self.outlet.publish_acks(m) {
+            tracing::error!(error = %e, "Cannot publish the acknowledgements.");
+        }
+    }
+
     /// Publishes the filter's switch of every loop closure.
     fn publish_switches(&mut self, version: u64) {
         self.new_loop_closure = false;
@@ -431,4 +450,13 @@ impl EngineLoop {
             tracing::error!(error = %e, "Cannot publish the switches.");
         }
     }
+}
+
+/// A number for this daemon start, nonzero and different from the last
+/// start's: the clock's nanoseconds mixed with the process id.
+fn new_instance() -> u64 {
+    let ns = SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map_or(0, |d| d.as_nanos() as u64);
+    (ns ^ u64::from(std::process::id()).rotate_left(32)).max(1)
 }

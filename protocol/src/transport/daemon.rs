@@ -4,7 +4,9 @@
 
 use super::services::{self, Access, Event, Namespace, Topic};
 use super::{node, shm, TransportError};
-use crate::message::{Edge, GpsFix, Keyframe, Pose, Rejection, SnapshotHeader, Switch, SwitchesHeader};
+use crate::message::{
+    Acknowledgements, Edge, GpsFix, Keyframe, Pose, Rejection, SnapshotHeader, Switch, SwitchesHeader,
+};
 use crate::service::Qos;
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
@@ -64,6 +66,7 @@ struct Services {
     _poses: Topic<[Pose], SnapshotHeader>,
     _rejections: Topic<Rejection>,
     _switches: Topic<[Switch], SwitchesHeader>,
+    _acks: Topic<Acknowledgements>,
     _ingest: Event,
     _published: Event,
 }
@@ -84,6 +87,7 @@ impl Ingress {
         let poses = services::poses(&node, &ns, access)?;
         let rejections = services::rejections(&node, &ns, access)?;
         let switches = services::switches(&node, &ns, access)?;
+        let acks = services::acks(&node, &ns, access)?;
         let ingest = services::ingest(&node, &ns, access)?;
         let published = services::published(&node, &ns, access)?;
         let names = &ns.services;
@@ -117,6 +121,7 @@ impl Ingress {
                 _poses: poses,
                 _rejections: rejections,
                 _switches: switches,
+                _acks: acks,
                 _ingest: ingest,
                 _published: published,
             },
@@ -210,6 +215,7 @@ pub struct Outlet {
     published: Notifier<ipc::Service>,
     rejections: Publisher<ipc::Service, Rejection, ()>,
     switches: Publisher<ipc::Service, [Switch], SwitchesHeader>,
+    acks: Publisher<ipc::Service, Acknowledgements, ()>,
 }
 
 impl Outlet {
@@ -240,12 +246,17 @@ impl Outlet {
             .notifier_builder()
             .create()
             .map_err(|e| ns.fail("open", &names.published, &e))?;
+        let acks = services::acks(&node, &ns, Access::Open)?
+            .publisher_builder()
+            .create()
+            .map_err(|e| ns.fail("open", &names.acks, &e))?;
         Ok(Self {
             _node: node,
             poses,
             published,
             rejections,
             switches,
+            acks,
         })
     }
 
@@ -280,6 +291,15 @@ impl Outlet {
             ..header
         };
         send_slice(&self.switches, header, count, switches, "switches")
+    }
+
+    /// Publishes the acknowledgements (before the snapshot that carries
+    /// the same).
+    pub fn publish_acks(&self, m: Acknowledgements) -> Result<(), TransportError> {
+        self.acks
+            .send_copy(m)
+            .map(|_| ())
+            .map_err(|e| TransportError::other("send acknowledgements", e))
     }
 
     /// Publishes a rejection.

@@ -34,6 +34,14 @@ pub enum TransportError {
         /// The service that was full.
         service: String,
     },
+    /// The daemon stopped answering and no daemon came back within the
+    /// frontend's reconnect bound.
+    DaemonGone {
+        /// The namespace.
+        namespace: String,
+        /// Seconds waited.
+        waited_s: f64,
+    },
     /// Any other iceoryx2 failure, with its operation and cause.
     Other {
         /// What was attempted.
@@ -79,6 +87,10 @@ impl fmt::Display for TransportError {
             TransportError::Backpressure { service } => {
                 write!(f, "the daemon's `{service}` queue stayed full; it is not keeping up or has stopped")
             }
+            TransportError::DaemonGone { namespace, waited_s } => write!(
+                f,
+                "the daemon serving `{namespace}` stopped answering and none came back within {waited_s:.1} s"
+            ),
             TransportError::Other { operation, cause } => write!(f, "{operation}: {cause}"),
         }
     }

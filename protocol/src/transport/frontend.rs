@@ -2,9 +2,10 @@
 
 use super::services::{self, Access, Namespace};
 use super::{node, TransportError};
-use crate::message::{Edge, GpsFix, Keyframe};
+use crate::message::{Acknowledgements, Edge, GpsFix, Keyframe};
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
+use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::port::{BackpressureAction, BackpressureInfo};
 use iceoryx2::prelude::*;
 use std::time::Duration;
@@ -18,6 +19,7 @@ pub struct FrontendLink {
     edges: Publisher<ipc::Service, Edge, ()>,
     gps: Publisher<ipc::Service, GpsFix, ()>,
     ingest: Notifier<ipc::Service>,
+    acks: Subscriber<ipc::Service, Acknowledgements, ()>,
 }
 
 impl FrontendLink {
@@ -54,6 +56,10 @@ impl FrontendLink {
             .notifier_builder()
             .create()
             .map_err(|e| ns.fail("open", &names.ingest, &e))?;
+        let acks = services::acks(&node, &ns, Access::Open)?
+            .subscriber_builder()
+            .create()
+            .map_err(|e| ns.fail("open", &names.acks, &e))?;
         Ok(Self {
             _node: node,
             ns,
@@ -61,6 +67,7 @@ impl FrontendLink {
             edges,
             gps,
             ingest,
+            acks,
         })
     }
 
@@ -86,6 +93,20 @@ impl FrontendLink {
             .send_copy(m)
             .map(|_| ())
             .map_err(|e| self.ns.fail("send on", &self.ns.services.gps, &e))
+    }
+
+    /// The newest acknowledgements delivered since the last call, if any
+    /// (never blocks).
+    pub fn latest_acks(&self) -> Result<Option<Acknowledgements>, TransportError> {
+        let mut newest = None;
+        while let Some(s) = self
+            .acks
+            .receive()
+            .map_err(|e| TransportError::other("receive acknowledgements", e))?
+        {
+            newest = Some(*s.payload());
+        }
+        Ok(newest)
     }
 
     /// Wakes the daemon to take what was published.

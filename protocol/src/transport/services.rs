@@ -9,7 +9,9 @@
 
 use super::classify::{classify, Explain};
 use super::{protocol_attributes, service_name, TransportError};
-use crate::message::{Edge, GpsFix, Keyframe, Pose, Rejection, SnapshotHeader, Switch, SwitchesHeader};
+use crate::message::{
+    Acknowledgements, Edge, GpsFix, Keyframe, Pose, Rejection, SnapshotHeader, Switch, SwitchesHeader,
+};
 use crate::service::{Qos, ServiceNames};
 use iceoryx2::prelude::*;
 use iceoryx2::service::attribute::AttributeVerifier;
@@ -190,6 +192,29 @@ pub(crate) fn rejections(
         buffer: 64,
         borrowed: None,
         history: q.rejection_history,
+        safe_overflow: true,
+    })
+}
+
+/// Acknowledgements, daemon → frontends. Created with one publisher,
+/// subscribers for every frontend and every snapshot subscriber, each
+/// keeping only the newest (buffer 1, safe overflow), and a history of 1
+/// so a frontend learns at once which daemon serves it.
+pub(crate) fn acks(
+    node: &Node<ipc::Service>,
+    ns: &Namespace,
+    access: Access,
+) -> Result<Topic<Acknowledgements>, TransportError> {
+    let name = &ns.services.acks;
+    let builder = node
+        .service_builder(&service_name(name)?)
+        .publish_subscribe::<Acknowledgements>();
+    topic(builder, ns, name, access, |q| TopicSizes {
+        publishers: 1,
+        subscribers: q.max_frontends + q.max_subscribers,
+        buffer: 1,
+        borrowed: None,
+        history: 1,
         safe_overflow: true,
     })
 }

@@ -108,7 +108,11 @@ impl DaemonSink {
         timeout: Duration,
         rate: Option<f64>,
     ) -> anyhow::Result<Self> {
-        let frontend = Frontend::connect_to(namespace, config.backpressure())?;
+        let endpoint = slamd::ipc::Endpoint {
+            namespace: namespace.to_string(),
+            ..config.into()
+        };
+        let frontend = Frontend::connect(endpoint)?;
         let snapshots = Snapshots::open(namespace)?;
         Ok(Self {
             frontend,
@@ -122,9 +126,22 @@ impl DaemonSink {
     }
 
     /// Takes in the snapshots that arrived; returns the latencies they settle.
+    /// Looks at the acknowledgements every [`RESTART_POLL`] meanwhile, so
+    /// that a restarted daemon gets sent what it lacks.
     fn collect(&mut self, wait: Duration) -> anyhow::Result<Vec<(usize, f64)>> {
         let mut done = Vec::new();
-        if let Some(s) = self.snapshots.wait(wait)? {
+        let deadline = Instant::now() + wait;
+        let snapshot = loop {
+            let left = deadline.saturating_duration_since(Instant::now());
+            if let Some(s) = self.snapshots.wait(left.min(RESTART_POLL))? {
+                break Some(s);
+            }
+            self.frontend.poll()?;
+            if left <= RESTART_POLL {
+                break None;
+            }
+        };
+        if let Some(s) = snapshot {
             let now = Instant::now();
             if let Some(acked) = s.header().ack_of(self.frontend.id()) {
                 while self.pending.front().is_some_and(|p| p.1 <= acked) {
@@ -234,6 +251,10 @@ impl Sink for DaemonSink {
         "daemon"
     }
 }
+
+/// How often a replay waiting for a snapshot checks whether the daemon
+/// restarted.
+const RESTART_POLL: Duration = Duration::from_millis(50);
 
 /// No snapshot for this long after the stream ends: the daemon's closing
 /// re-solves are done.

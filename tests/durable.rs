@@ -1,0 +1,88 @@
+//! A daemon with a state directory: killed mid-stream and restarted, it
+//! loses nothing it acknowledged, and a replay through it completes.
+
+use crate::daemon::Daemon;
+use slamd::store::MapFile;
+use slamd_tests::{dataset, read, slamd_bin};
+use std::path::PathBuf;
+use std::process::{Command, Stdio};
+use std::time::Duration;
+
+fn state_dir(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("slamd-durable-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    d
+}
+
+/// Intel streamed at 800 keyframes a second through a daemon that is
+/// SIGKILLed twice mid-stream and restarted on the same state directory:
+/// the replay completes at the optimum (45.005), and the map the last
+/// daemon leaves on SIGTERM holds every keyframe and edge of the file.
+#[test]
+fn a_stream_survives_two_daemon_kills_and_ends_at_the_optimum() {
+    let dir = state_dir("kills");
+    let dir_arg = dir.to_str().unwrap().to_string();
+    let namespace = format!("slamd-test-{}-kills", std::process::id());
+    let args = ["--state", dir_arg.as_str()];
+    let mut daemon = Daemon::serve(&namespace, &args, &[]);
+    let file = dataset("intel_sesync.g2o");
+    let replay = Command::new(slamd_bin())
+        .args(["replay", file.to_str().unwrap(), "--namespace", &namespace])
+        .args(["--json", "--timeout", "60", "--rate", "800"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("start the replay");
+    for _ in 0..2 {
+        std::thread::sleep(Duration::from_millis(700));
+        daemon.signal(libc::SIGKILL);
+        daemon = Daemon::serve(&namespace, &args, &[]);
+    }
+    let out = replay.wait_with_output().expect("the replay ends");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "replay failed: {stderr}");
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON");
+    let chi2 = v["chi2"].as_f64().unwrap();
+    assert!((chi2 - 45.005).abs() < 1e-3, "final χ² {chi2}");
+    assert!(daemon.stop().success());
+
+    let g = read("intel_sesync.g2o");
+    let map = MapFile::read(&dir.join("map")).expect("a checkpoint on SIGTERM");
+    assert_eq!(map.keyframes.len(), g.len());
+    assert_eq!(map.edges.len(), g.edges().len());
+    // no edge went in twice, though the frontend sent some again
+    let mut pairs: Vec<_> = map.edges.iter().map(|e| (e.edge.from, e.edge.to)).collect();
+    pairs.sort_unstable();
+    pairs.dedup();
+    assert_eq!(pairs.len(), g.edges().len());
+}
+
+/// `--map` with a state directory that already holds one is refused:
+/// which map goes on would be a guess.
+#[test]
+fn a_second_map_for_a_state_directory_is_refused() {
+    let dir = state_dir("two-maps");
+    std::fs::create_dir_all(&dir).unwrap();
+    let mut map = MapFile::default();
+    map.keyframes.push(slamd::store::MapKeyframe {
+        id: 0,
+        guess: None,
+        estimate: slamd::geometry::Pose2::IDENTITY,
+        lin: slamd::geometry::Pose2::IDENTITY,
+        joined: true,
+    });
+    std::fs::write(dir.join("map"), map.encode()).unwrap();
+    let other = dir.join("other.map");
+    std::fs::write(&other, map.encode()).unwrap();
+    let (code, _, err) = slamd_tests::run_slamd(&[
+        "run",
+        "--namespace",
+        &format!("slamd-test-{}-two-maps", std::process::id()),
+        "--state",
+        dir.to_str().unwrap(),
+        "--map",
+        other.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 2);
+    assert!(err.contains("already holds a map"), "{err}");
+}
