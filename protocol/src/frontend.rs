@@ -232,7 +232,7 @@ impl Frontend {
             self.outbox.pop_front();
         }
         self.outbox.push_back((sequence, m));
-        if self.outbox.len() % PRUNE_EVERY == 0 {
+        if self.outbox.len().is_multiple_of(PRUNE_EVERY) {
             // between flushes, still forget what was acknowledged
             let before = self.instance;
             self.poll()?;
