@@ -66,7 +66,7 @@ fn iceoryx2(session: usize, cpu: Option<usize>) -> Vec<f64> {
         Frontend::add_keyframe(&mut f, k as u64 + 1, 0, None).unwrap();
         let t0 = Instant::now();
         let seq = Frontend::add_edge(&mut f, &edge(k)).unwrap();
-        Frontend::flush(&f).unwrap();
+        Frontend::flush(&mut f).unwrap();
         loop {
             let s = snaps
                 .wait(Duration::from_secs(5))
