@@ -44,7 +44,7 @@ fn manhattan_saved_at_1750_continues_to_the_optimum() {
     let bytes = saved.encode();
     let map = MapFile::decode(Path::new("manhattan.map"), &bytes).unwrap();
     assert_eq!(map.keyframes.len(), 1750);
-    let mut restored = Engine::restore(deterministic(), &map).unwrap();
+    let mut restored = Engine::restore(deterministic(), &map, false).unwrap();
     restored.update();
     let (a, b) = (first.snapshot(), restored.snapshot());
     let pa: Vec<_> = a.poses().map(|(_, p)| p).collect();
@@ -74,6 +74,6 @@ fn a_map_that_breaks_the_graph_is_refused() {
     feed(&mut engine, &g, 0..50);
     let mut map = engine.map();
     map.keyframes.truncate(40);
-    let err = Engine::restore(deterministic(), &map).err().unwrap();
+    let err = Engine::restore(deterministic(), &map, false).err().unwrap();
     assert!(err.to_string().contains("unknown keyframe"), "{err}");
 }

@@ -51,6 +51,9 @@ const OUTBOX_LIMIT: usize = 1 << 20;
 /// does not flush.
 const PRUNE_EVERY: usize = 1024;
 
+/// Messages sent again between two pokes of the daemon.
+const POKE_EVERY: usize = 256;
+
 /// How often a frontend waiting for a daemon looks again.
 const POLL: Duration = Duration::from_millis(10);
 
@@ -259,12 +262,31 @@ impl Frontend {
         }
     }
 
-    /// Sends every kept message again, oldest first, and wakes the daemon.
+    /// Sends every kept message again, oldest first, waking the daemon as
+    /// it goes: more than its queues hold may be kept.
     fn send_again(&mut self) -> Result<(), TransportError> {
+        let started = Instant::now();
         for i in 0..self.outbox.len() {
             let m = self.outbox[i].1;
-            self.publish(&m)?;
+            loop {
+                match self.publish(&m) {
+                    Ok(()) => break,
+                    Err(TransportError::Backpressure { .. }) if started.elapsed() < self.endpoint.reconnect => {
+                        self.link.poke()?;
+                    }
+                    Err(TransportError::Backpressure { .. }) => {
+                        return Err(TransportError::DaemonGone {
+                            namespace: self.endpoint.namespace.clone(),
+                            waited_s: started.elapsed().as_secs_f64(),
+                        })
+                    }
+                    Err(e) => return Err(e),
+                }
+            }
             self.resent += 1;
+            if i % POKE_EVERY == POKE_EVERY - 1 {
+                self.link.poke()?;
+            }
         }
         self.link.poke()
     }

@@ -124,9 +124,11 @@ impl Engine {
 
     /// An engine holding `map`: its keyframes, edges with their weights
     /// and switches, fixes and georeference, the factor built once at the
-    /// saved estimate. The map's GPS origin wins over the configured one
-    /// (its fixes are relative to it).
-    pub fn restore(config: EngineConfig, map: &crate::store::MapFile) -> Result<Self, EngineError> {
+    /// saved linearisation point. With `polish` (keyframes or edges that
+    /// the map's estimate does not cover yet), a re-solve's robust polish
+    /// runs first, over everything. The map's GPS origin wins over the
+    /// configured one (its fixes are relative to it).
+    pub fn restore(config: EngineConfig, map: &crate::store::MapFile, polish: bool) -> Result<Self, EngineError> {
         let mut engine = Engine::new(config);
         if let Some(o) = map.origin {
             if engine.frame.is_some_and(|f| f.origin != o) {
@@ -134,13 +136,24 @@ impl Engine {
             }
             engine.frame = Some(LocalFrame::new(o));
         }
-        let state = restore::state_of(map, engine.frame, &engine.config)?;
+        if engine.frame.is_none() {
+            // the first fix sets the origin, as in add_gps
+            let first = map.fixes.first().map(|f| f.position);
+            engine.frame = first
+                .and_then(|p| Geodetic::new(p.lat, p.lon, p.height).ok())
+                .map(LocalFrame::new);
+        }
+        let polish = if polish { Polish::Full } else { Polish::None };
+        let state = restore::state_of(map, engine.frame, polish, &engine.config)?;
         engine.work_base = state.work();
         engine.schedule.fresh(&state);
         engine.schedule.polished(&state);
         engine.state = state;
         engine.fixes = map.fixes.clone();
         engine.version = 1;
+        if polish == Polish::Full {
+            engine.stats.resolves += 1;
+        }
         Ok(engine)
     }
 

@@ -9,10 +9,13 @@
 //! then built once at the saved linearisation point ([`factorise`]), so
 //! the first solve gives the saved estimate again: no polish, no
 //! incremental updates, so a City10000-sized map is back in a fraction of
-//! a second.
+//! a second. A map with keyframes and edges its estimate does not cover
+//! yet (a journal's tail folded in) gets one re-solve's robust polish
+//! first ([`rebuild`]).
 
 use super::model::{EdgeState, Model};
-use super::rebuild::factorise;
+use super::op::Polish;
+use super::rebuild::{factorise, rebuild};
 use super::state::State;
 use super::{EngineConfig, EngineError, FixInput};
 use crate::geometry::Pose2;
@@ -21,10 +24,12 @@ use crate::store::{MapEdge, MapFile, MapKeyframe, SavedGeoref};
 use faer::c64;
 use std::collections::VecDeque;
 
-/// The state of `map`'s graph, with its GPS fixes in `frame`.
+/// The state of `map`'s graph, with its GPS fixes in `frame`, polished
+/// as `polish` says before the factor is built.
 pub(super) fn state_of(
     map: &MapFile,
     frame: Option<LocalFrame>,
+    polish: Polish,
     config: &EngineConfig,
 ) -> Result<State, EngineError> {
     let mut model = Model::default();
@@ -56,7 +61,12 @@ pub(super) fn state_of(
         model.georef = Some(g.georef);
         model.gps_weight = g.weight;
     }
-    factorise(model, lin, config).map_err(|e| EngineError::Restore(e.to_string()))
+    let state = if polish == Polish::None {
+        factorise(model, lin, config)
+    } else {
+        rebuild(model, &lin, polish, config)
+    };
+    state.map_err(|e| EngineError::Restore(e.to_string()))
 }
 
 /// Joins the keyframes linked to the gauge, applies the edges between
@@ -113,7 +123,7 @@ fn join(model: &mut Model, lin: &mut [Pose2], map: &MapFile) {
 
 /// A fix as the engine holds it: its keyframe's index, ENU position and
 /// covariance.
-pub(super) fn fix_of(f: &FixInput, model: &Model, frame: Option<LocalFrame>) -> Result<GpsFix, EngineError> {
+fn fix_of(f: &FixInput, model: &Model, frame: Option<LocalFrame>) -> Result<GpsFix, EngineError> {
     let p = f.position;
     let position = Geodetic::new(p.lat, p.lon, p.height).map_err(EngineError::Gps)?;
     let cov = covariance(f.covariance).map_err(EngineError::Gps)?;

@@ -12,7 +12,10 @@
 use super::acks::Acks;
 use super::engine_loop::EngineLoop;
 use crate::engine::{Engine, EngineError};
-use crate::store::{Cut, MapFile, Record, StateDir};
+use crate::geometry::Pose2;
+use crate::store::{Cut, MapEdge, MapFile, MapKeyframe, Record, StateDir};
+use slamd_types::KeyframeId;
+use std::collections::{HashMap, HashSet};
 use std::time::{Duration, Instant};
 
 /// What the engine thread starts from.
@@ -29,9 +32,11 @@ pub struct Start {
 }
 
 impl EngineLoop {
-    /// Takes up `start`: the map in one step, then the journal's tail as
-    /// one batch (applied, not journaled again, solved once by the first
-    /// snapshot).
+    /// Takes up `start`: the journal's tail is folded into the map as the
+    /// daemon would have applied it (a repeated keyframe refused, an edge
+    /// or fix held until its keyframe is there), then the engine is built
+    /// from the whole in one step, polished once when the tail added
+    /// anything. Nothing is journaled again.
     pub fn take_up(&mut self, start: Start) -> Result<(), EngineError> {
         let t0 = Instant::now();
         self.store = start.store;
@@ -42,46 +47,49 @@ impl EngineLoop {
                 "The journal ends in a damaged record; it and what follows are cut off."
             );
         }
-        self.recovering = true;
-        if let Some(map) = &start.map {
-            self.restore(map)?;
+        let saved = start.map.is_some();
+        let mut map = start.map.unwrap_or_default();
+        self.acks = Acks::from_saved(&map.acks);
+        let mut fold = Fold::new(&map);
+        for r in std::mem::take(&mut map.held) {
+            fold.record(&mut map, r);
         }
         let tail = start.tail.len();
         for r in start.tail {
             if self.acks.take(r.origin()) {
-                self.apply(r);
+                fold.record(&mut map, r);
             }
         }
         self.acks.seal();
-        self.recovering = false;
-        if start.map.is_some() || tail > 0 {
-            tracing::info!(
-                keyframes = self.counters.keyframes,
-                edges = self.counters.edges,
-                journal_records = tail,
-                seconds = t0.elapsed().as_secs_f64(),
-                "Map restored."
-            );
+        fold.held = fold.waiting.drain().flat_map(|(_, v)| v).collect();
+        if !saved && map.keyframes.is_empty() && fold.held.is_empty() {
+            self.durable = self.acks.header();
+            return Ok(());
         }
-        // what was acknowledged before is acknowledged again at once
-        self.durable = self.acks.header();
-        Ok(())
-    }
-
-    fn restore(&mut self, map: &MapFile) -> Result<(), EngineError> {
-        self.engine = Engine::restore(self.config.engine(), map)?;
+        self.engine = Engine::restore(self.config.engine(), &map, tail > 0)?;
         self.edge_origin = map.edges.iter().map(|e| e.origin).collect();
-        self.acks = Acks::from_saved(&map.acks);
         self.counters.keyframes = map.keyframes.len() as u64;
         self.counters.edges = map.edges.len() as u64;
         self.counters.fixes = map.fixes.len() as u64;
-        for r in &map.held {
-            match *r {
+        self.counters.rejected += fold.refused;
+        self.recovering = true;
+        for r in fold.held {
+            match r {
                 Record::Edge(o, e) => self.add_edge(o, e, Instant::now()),
                 Record::Fix(o, f) => self.add_gps(o, f, Instant::now()),
                 _ => {}
             }
         }
+        self.recovering = false;
+        tracing::info!(
+            keyframes = self.counters.keyframes,
+            edges = self.counters.edges,
+            journal_records = tail,
+            seconds = t0.elapsed().as_secs_f64(),
+            "Map restored."
+        );
+        // what was acknowledged before is acknowledged again at once
+        self.durable = self.acks.header();
         Ok(())
     }
 
@@ -146,6 +154,68 @@ impl EngineLoop {
                 tracing::debug!(seconds = t0.elapsed().as_secs_f64(), "Checkpoint written.");
             }
             Err(e) => tracing::error!(error = %e, "Cannot write a checkpoint; the journal goes on."),
+        }
+    }
+}
+
+/// Journal records folded into a map as the engine thread would have
+/// applied them one by one.
+struct Fold {
+    ids: HashSet<KeyframeId>,
+    /// Edges and fixes waiting for a keyframe, by its id.
+    waiting: HashMap<KeyframeId, Vec<Record>>,
+    /// Still waiting at the end.
+    held: Vec<Record>,
+    /// Records the engine would have refused.
+    refused: u64,
+}
+
+impl Fold {
+    fn new(map: &MapFile) -> Self {
+        Self {
+            ids: map.keyframes.iter().map(|k| k.id).collect(),
+            waiting: HashMap::new(),
+            held: Vec::new(),
+            refused: 0,
+        }
+    }
+
+    fn record(&mut self, map: &mut MapFile, r: Record) {
+        match r {
+            Record::Keyframe(_, id, guess) => {
+                if !self.ids.insert(id) {
+                    self.refused += 1;
+                    return;
+                }
+                let at = guess.unwrap_or(Pose2::IDENTITY);
+                map.keyframes.push(MapKeyframe {
+                    id,
+                    guess,
+                    estimate: at,
+                    lin: at,
+                    joined: false,
+                });
+                for w in self.waiting.remove(&id).unwrap_or_default() {
+                    self.record(map, w);
+                }
+            }
+            Record::Edge(o, e) => match [e.from, e.to].into_iter().find(|k| !self.ids.contains(k)) {
+                Some(missing) => self.waiting.entry(missing).or_default().push(r),
+                None => map.edges.push(MapEdge {
+                    edge: e,
+                    scale: 1.0,
+                    switch: 1.0,
+                    origin: o,
+                }),
+            },
+            Record::Fix(_, f) => {
+                if self.ids.contains(&f.keyframe) {
+                    map.fixes.push(f);
+                } else {
+                    self.waiting.entry(f.keyframe).or_default().push(r);
+                }
+            }
+            Record::Refused(_) => {}
         }
     }
 }

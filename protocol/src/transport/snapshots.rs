@@ -40,6 +40,10 @@ impl SwitchesSample {
     }
 }
 
+/// The shortest wait handed to iceoryx2's timed wait, whose socket
+/// timeout has microsecond resolution and reads zero as "forever".
+const MIN_WAIT: Duration = Duration::from_micros(2);
+
 /// Subscriber to snapshots, switches and rejections of one namespace.
 pub struct SnapshotLink {
     _node: Node<ipc::Service>,
@@ -102,7 +106,9 @@ impl SnapshotLink {
                 return Ok(Some(s));
             }
             let left = deadline.saturating_duration_since(Instant::now());
-            if left.is_zero() {
+            // below a microsecond the socket timeout would be {0, 0}: no
+            // timeout at all, a wait without end
+            if left < MIN_WAIT {
                 return Ok(None);
             }
             self.published
