@@ -88,8 +88,10 @@ impl EngineLoop {
             seconds = t0.elapsed().as_secs_f64(),
             "Map restored."
         );
-        // what was acknowledged before is acknowledged again at once
+        // what was acknowledged before is acknowledged again at once, and
+        // the restored map goes out
         self.durable = self.acks.header();
+        self.dirty = true;
         Ok(())
     }
 

@@ -79,7 +79,7 @@ pub struct EngineLoop {
     pub(super) last_checkpoint: Instant,
     /// This daemon start's number in the acknowledgements.
     instance: u64,
-    dirty: bool,
+    pub(super) dirty: bool,
     last_publish: Option<Instant>,
     last_input: Instant,
     /// Who sent each engine edge, by index.
