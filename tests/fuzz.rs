@@ -332,3 +332,120 @@ proptest! {
         });
     }
 }
+
+/// A small saved map: the first 12 keyframes of Manhattan through the
+/// engine, with an acknowledgement, a held edge and a GPS fix.
+fn small_map() -> slamd::store::MapFile {
+    use slamd::engine::{Engine, EngineConfig, FixInput};
+    let g = slamd_tests::read("manhattanolson3500_g2oversion.g2o");
+    let groups = g.by_newer();
+    let mut engine = Engine::new(EngineConfig::default());
+    for (k, group) in groups.iter().enumerate().take(12) {
+        engine.add_keyframe(g.id_of(k), None).unwrap();
+        for &e in group {
+            engine.add_edge(g.edge_input(e)).unwrap();
+        }
+        engine.update();
+    }
+    let position = slamd::gps::Geodetic::new(45.0, 9.0, 100.0).unwrap();
+    let fix = FixInput {
+        keyframe: 3,
+        position,
+        covariance: [4.0, 0.0, 0.0, 4.0],
+    };
+    engine.add_gps(fix).unwrap();
+    engine.update();
+    let mut map = engine.map();
+    map.acks.push(slamd::store::AckState {
+        frontend: 5,
+        through: 40,
+        beyond: vec![42],
+    });
+    let o = slamd_protocol::codec::Origin {
+        frontend: 5,
+        sequence: 42,
+    };
+    map.held.push(slamd::store::Record::Edge(o, g.edge_input(20)));
+    map
+}
+
+/// The map file's head and body, and the same file with `body` in place
+/// of its own and a checksum that matches it.
+fn reframed(file: &[u8], body: &[u8]) -> Vec<u8> {
+    let mut out = file[..24].to_vec();
+    out.extend_from_slice(&(body.len() as u32).to_le_bytes());
+    out.extend_from_slice(&crc32c::crc32c(body).to_le_bytes());
+    out.extend_from_slice(body);
+    out
+}
+
+/// A map that decodes is taken up by the engine or refused with a reason,
+/// never a panic.
+fn check_map(bytes: &[u8]) {
+    use slamd::store::MapFile;
+    let path = Path::new("fuzz.map");
+    if let Ok(map) = MapFile::decode(path, bytes) {
+        let config = slamd::engine::EngineConfig {
+            background: false,
+            ..slamd::engine::EngineConfig::default()
+        };
+        if let Err(e) = slamd::engine::Engine::restore(config, &map, false) {
+            assert!(!e.to_string().is_empty());
+        }
+        let _ = map.graph();
+    }
+}
+
+proptest! {
+    #![proptest_config(config())]
+
+    /// A saved map with bytes flipped or set (its checksum made to match,
+    /// so the body's decoder and the engine see them), or cut short.
+    #[test]
+    fn maps_take_mutated_bytes(
+        edits in prop::collection::vec((any::<usize>(), any::<u8>()), 1..8),
+        cut in any::<usize>(),
+    ) {
+        thread_local! {
+            static MAP: Vec<u8> = small_map().encode();
+        }
+        MAP.with(|file| {
+            let mut body = file[32..].to_vec();
+            for &(at, v) in &edits {
+                let n = body.len();
+                body[at % n] = v;
+            }
+            check_map(&reframed(file, &body));
+            check_map(&file[..cut % file.len()]);
+            let mut flipped = file.clone();
+            let n = flipped.len();
+            flipped[edits[0].0 % n] ^= 1 << (edits[0].1 % 8);
+            prop_assert!(slamd::store::MapFile::decode(Path::new("x"), &flipped).is_err() || flipped == *file);
+            Ok(())
+        })?;
+    }
+
+    /// Journal record payloads of arbitrary bytes, and journals of
+    /// arbitrary bytes after a valid head: every record read is checked,
+    /// the rest is cut with a reason.
+    #[test]
+    fn journals_take_arbitrary_bytes(bytes in prop::collection::vec(any::<u8>(), 0..400)) {
+        if let Ok(r) = slamd::store::Record::decode(&bytes) {
+            if let slamd::store::Record::Edge(_, e) = r {
+                prop_assert!(e.measurement.is_finite());
+                prop_assert!(Information::from_upper(e.information.upper()).is_ok());
+            }
+        }
+        let dir = std::env::temp_dir().join(format!("slamd-fuzz-journal-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join(format!("{:?}", std::thread::current().id()).replace(['(', ')'], ""));
+        let never = slamd::store::SyncPolicy::Never;
+        drop(slamd::store::Journal::create(&path, 0, never, std::time::Duration::ZERO).unwrap());
+        let mut file = std::fs::read(&path).unwrap();
+        file.extend_from_slice(&bytes);
+        std::fs::write(&path, &file).unwrap();
+        let read = slamd::store::journal::read(&path).unwrap().expect("the file is there");
+        prop_assert!(read.valid_len as usize <= file.len());
+        prop_assert_eq!(read.cut.is_some(), (read.valid_len as usize) < file.len());
+    }
+}

@@ -271,7 +271,9 @@ impl Frontend {
             loop {
                 match self.publish(&m) {
                     Ok(()) => break,
-                    Err(TransportError::Backpressure { .. }) if started.elapsed() < self.endpoint.reconnect => {
+                    Err(TransportError::Backpressure { .. })
+                        if started.elapsed() < self.endpoint.reconnect =>
+                    {
                         self.link.poke()?;
                     }
                     Err(TransportError::Backpressure { .. }) => {

@@ -128,7 +128,11 @@ impl Engine {
     /// the map's estimate does not cover yet), a re-solve's robust polish
     /// runs first, over everything. The map's GPS origin wins over the
     /// configured one (its fixes are relative to it).
-    pub fn restore(config: EngineConfig, map: &crate::store::MapFile, polish: bool) -> Result<Self, EngineError> {
+    pub fn restore(
+        config: EngineConfig,
+        map: &crate::store::MapFile,
+        polish: bool,
+    ) -> Result<Self, EngineError> {
         let mut engine = Engine::new(config);
         if let Some(o) = map.origin {
             if engine.frame.is_some_and(|f| f.origin != o) {

@@ -1,8 +1,9 @@
 //! The write-ahead journal: every message the daemon takes in, framed and
 //! checksummed, appended in the order the engine applied them.
 //!
-//! File: a 24-byte head `"SLAMDJNL" | version: u32 | 0: u32 | generation:
-//! u64` (the map generation it follows), then one frame per [`Record`].
+//! File: a 24-byte head `"SLAMDJNL" | version: u32 | crc32c: u32 |
+//! generation: u64` (the map generation it follows; the checksum covers
+//! the other three fields), then one frame per [`Record`].
 //! Records are buffered and written by [`Journal::commit`], once per batch
 //! (group commit), before the snapshot that acknowledges them goes out.
 
@@ -57,32 +58,48 @@ pub struct Contents {
     pub cut: Option<Cut>,
 }
 
-fn head(generation: u64) -> Vec<u8> {
+/// A file's head: `magic | version | crc32c | generation`.
+pub(super) fn head(magic: &[u8; 8], generation: u64) -> Vec<u8> {
     let mut p = Put::default();
-    p.0.extend_from_slice(MAGIC);
+    p.0.extend_from_slice(magic);
     p.u32(FORMAT_VERSION);
-    p.u32(0);
+    p.u32(head_crc(magic, FORMAT_VERSION, generation));
     p.u64(generation);
     p.0
 }
 
-/// Checks a file's head: magic, then format version. Returns the
+fn head_crc(magic: &[u8; 8], version: u32, generation: u64) -> u32 {
+    let crc = crc32c::crc32c(magic);
+    let crc = crc32c::crc32c_append(crc, &version.to_le_bytes());
+    crc32c::crc32c_append(crc, &generation.to_le_bytes())
+}
+
+/// Checks a file's head: magic, format version, checksum. Returns the
 /// generation.
 pub(super) fn check_head(path: &Path, bytes: &[u8], magic: &[u8; 8], what: &str) -> Result<u64, StoreError> {
-    if bytes.len() < HEAD || &bytes[..8] != magic {
+    if bytes.len() < 8 || &bytes[..8] != magic {
         return Err(StoreError::NotOurs {
             path: path.to_path_buf(),
             what: what.into(),
         });
     }
-    let version = u32::from_le_bytes(bytes[8..12].try_into().unwrap_or_default());
-    if version != FORMAT_VERSION {
+    let field = |at: usize, n: usize| bytes.get(at..at + n).unwrap_or_default();
+    let version = u32::from_le_bytes(field(8, 4).try_into().unwrap_or_default());
+    if bytes.len() >= 12 && version != FORMAT_VERSION {
         return Err(StoreError::Version {
             path: path.to_path_buf(),
             found: version,
         });
     }
-    Ok(u64::from_le_bytes(bytes[16..24].try_into().unwrap_or_default()))
+    let crc = u32::from_le_bytes(field(12, 4).try_into().unwrap_or_default());
+    let generation = u64::from_le_bytes(field(16, 8).try_into().unwrap_or_default());
+    if bytes.len() < HEAD || crc != head_crc(magic, version, generation) {
+        return Err(StoreError::Corrupt {
+            path: path.to_path_buf(),
+            why: format!("its {what} head is damaged"),
+        });
+    }
+    Ok(generation)
 }
 
 /// Reads a journal: every record up to the first that is torn, fails its
@@ -134,7 +151,7 @@ impl Journal {
         interval: Duration,
     ) -> Result<Self, StoreError> {
         let tmp = path.with_extension("tmp");
-        super::write_atomically(&tmp, path, &head(generation))?;
+        super::write_atomically(&tmp, path, &head(MAGIC, generation))?;
         Self::append_to(path, HEAD as u64, generation, policy, interval)
     }
 

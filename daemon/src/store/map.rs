@@ -1,8 +1,9 @@
 //! [`MapFile`]: a whole map as one versioned file, the daemon's checkpoint
 //! and what `slamd run --map` continues from.
 //!
-//! File: a 24-byte head `"SLAMDMAP" | version: u32 | 0: u32 | generation:
-//! u64`, then one frame (`len: u32 | crc32c: u32 | body`) whose body is, in
+//! File: a 24-byte head `"SLAMDMAP" | version: u32 | crc32c: u32 |
+//! generation: u64` (the checksum covers the other three fields), then one
+//! frame (`len: u32 | crc32c: u32 | body`) whose body is, in
 //! order (counts are `u64`, everything little-endian):
 //!
 //! - keyframes: `id: u64, joined: u8, has_guess: u8, guess: 3 × f64,
@@ -20,9 +21,9 @@
 //!   `u32` length and a journal record's payload.
 
 use super::bytes::{frame, unframe, Framed, Get, Put};
-use super::journal::{check_head, HEAD};
+use super::journal::{check_head, head, HEAD};
 use super::record::{get_edge, get_pose, put_edge, Record};
-use super::{StoreError, FORMAT_VERSION};
+use super::StoreError;
 use crate::gps::Georef;
 use crate::graph::{GraphError, PoseGraph};
 use faer::c64;
@@ -161,11 +162,8 @@ impl MapFile {
             p.u32(q.0.len() as u32);
             p.0.extend_from_slice(&q.0);
         }
-        let mut out = Vec::with_capacity(HEAD + 8 + p.0.len());
-        out.extend_from_slice(MAGIC);
-        out.extend_from_slice(&FORMAT_VERSION.to_le_bytes());
-        out.extend_from_slice(&0u32.to_le_bytes());
-        out.extend_from_slice(&self.generation.to_le_bytes());
+        let mut out = head(MAGIC, self.generation);
+        out.reserve(8 + p.0.len());
         frame(&mut out, &p.0);
         out
     }

@@ -118,6 +118,11 @@ fn another_format_version_is_refused_not_misread() {
     let err = StateDir::open(&dir, &StateConfig::default()).err().unwrap();
     assert!(matches!(err, StoreError::Version { found, .. } if found == FORMAT_VERSION + 1));
     assert!(err.to_string().contains("format version 2"), "{err}");
+    bytes[8..12].copy_from_slice(&FORMAT_VERSION.to_le_bytes());
+    bytes[20] ^= 1;
+    std::fs::write(&path, &bytes).unwrap();
+    let err = StateDir::open(&dir, &StateConfig::default()).err().unwrap();
+    assert!(err.to_string().contains("head is damaged"), "{err}");
     std::fs::write(&path, b"VERTEX_SE2 0 0 0 0\n").unwrap();
     let err = StateDir::open(&dir, &StateConfig::default()).err().unwrap();
     assert!(err.to_string().contains("not a slamd journal"), "{err}");
