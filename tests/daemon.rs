@@ -463,3 +463,37 @@ fn a_replay_through_the_daemon_ends_at_the_optimum() {
     );
     daemon.stop();
 }
+
+/// `slamd status --json` reads a running daemon's map, input and journal
+/// from what it publishes; with no daemon it says so and exits 2.
+#[test]
+fn status_shows_a_running_daemon() {
+    let dir = std::env::temp_dir().join(format!("slamd-status-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let daemon = Daemon::start("status", &[("SLAMD_STATE__DIR", dir.to_str().unwrap())]);
+    let config = daemon.config();
+    let snapshots = Snapshots::open(&config.namespace).unwrap();
+    let mut f = Frontend::connect(&config).unwrap();
+    let truth = walk(3);
+    for k in 0..3 {
+        f.add_keyframe(k, 0, None).unwrap();
+    }
+    f.add_edge(&exact(&truth, 0, 1, EdgeKind::Odometry)).unwrap();
+    let last = f.add_edge(&exact(&truth, 1, 2, EdgeKind::Odometry)).unwrap();
+    f.flush().unwrap();
+    wait_for_ack(&snapshots, f.id(), last);
+    let v = slamd_tests::run_json(&["status", "--namespace", &daemon.namespace, "--json"]);
+    assert_eq!(v["keyframes"], 3);
+    assert_eq!(v["edges"], 2);
+    assert_eq!(v["rejected"], 0);
+    assert_eq!(v["frontends_last_minute"], 1);
+    assert_eq!(v["acknowledged"][0]["through"], last);
+    // the journal holds five records past its 24-byte head
+    assert!(v["journal_bytes"].as_u64().unwrap() > 24, "{v}");
+    assert!(v["latency_p99_us"].as_f64().unwrap() > 0.0, "{v}");
+    daemon.stop();
+    let (code, _, err) =
+        slamd_tests::run_slamd(&["status", "--namespace", "slamd-test-nobody", "--wait", "0.2"]);
+    assert_eq!(code, 2);
+    assert!(err.contains("no slamd daemon publishes"), "{err}");
+}

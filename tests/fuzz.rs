@@ -430,18 +430,20 @@ proptest! {
     /// the rest is cut with a reason.
     #[test]
     fn journals_take_arbitrary_bytes(bytes in prop::collection::vec(any::<u8>(), 0..400)) {
-        if let Ok(r) = slamd::store::Record::decode(&bytes) {
-            if let slamd::store::Record::Edge(_, e) = r {
-                prop_assert!(e.measurement.is_finite());
-                prop_assert!(Information::from_upper(e.information.upper()).is_ok());
-            }
+        if let Ok(slamd::store::Record::Edge(_, e)) = slamd::store::Record::decode(&bytes) {
+            prop_assert!(e.measurement.is_finite());
+            prop_assert!(Information::from_upper(e.information.upper()).is_ok());
         }
         let dir = std::env::temp_dir().join(format!("slamd-fuzz-journal-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let path = dir.join(format!("{:?}", std::thread::current().id()).replace(['(', ')'], ""));
-        let never = slamd::store::SyncPolicy::Never;
-        drop(slamd::store::Journal::create(&path, 0, never, std::time::Duration::ZERO).unwrap());
-        let mut file = std::fs::read(&path).unwrap();
+        static HEAD: std::sync::OnceLock<Vec<u8>> = std::sync::OnceLock::new();
+        let head = HEAD.get_or_init(|| {
+            let never = slamd::store::SyncPolicy::Never;
+            drop(slamd::store::Journal::create(&path, 0, never, std::time::Duration::ZERO).unwrap());
+            std::fs::read(&path).unwrap()
+        });
+        let mut file = head.clone();
         file.extend_from_slice(&bytes);
         std::fs::write(&path, &file).unwrap();
         let read = slamd::store::journal::read(&path).unwrap().expect("the file is there");

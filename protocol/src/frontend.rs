@@ -92,7 +92,7 @@ impl Frontend {
         let link = FrontendLink::open(&endpoint.namespace, endpoint.backpressure)?;
         // nonzero and distinct across processes and connections
         let id = (std::process::id().wrapping_mul(2654435761) ^ NEXT.fetch_add(1, Ordering::Relaxed)).max(1);
-        let instance = link.latest_acks()?.map_or(0, |a| a.instance);
+        let instance = link.latest_status()?.map_or(0, |a| a.instance);
         Ok(Self {
             link,
             endpoint,
@@ -180,7 +180,7 @@ impl Frontend {
     /// has not acknowledged. Never blocks for long (a send may wait for
     /// backpressure).
     pub fn poll(&mut self) -> Result<(), TransportError> {
-        let Some(a) = self.link.latest_acks()? else {
+        let Some(a) = self.link.latest_status()? else {
             return Ok(());
         };
         let acked = a.ack_of(self.id).unwrap_or(0);

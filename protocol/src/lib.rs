@@ -32,7 +32,7 @@ pub mod transport;
 
 pub use frontend::{Endpoint, Frontend};
 pub use message::{
-    Acknowledgements, Edge, EdgeKindWire, FrontendAck, GpsFix, Keyframe, Pose, Rejection, RejectionReason,
+    DaemonStatus, Edge, EdgeKindWire, FrontendAck, GpsFix, Keyframe, Pose, Rejection, RejectionReason,
     SnapshotHeader, Switch, SwitchesHeader, MAX_FRONTENDS, PROTOCOL_VERSION,
 };
 pub use service::ServiceNames;

@@ -193,25 +193,43 @@ pub struct FrontendAck {
     pub sequence: u64,
 }
 
-/// The daemon's acknowledgements, daemon → frontends, published with every
-/// snapshot: which daemon is serving, and how far each of the most recent
-/// frontends has got.
+/// The daemon's status, daemon → frontends and operators, published with
+/// every snapshot and on every tick: which daemon is serving, how far each
+/// of the most recent frontends has got, and its health.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
-#[type_name("slamd::Acknowledgements")]
-pub struct Acknowledgements {
+#[type_name("slamd::DaemonStatus")]
+pub struct DaemonStatus {
     /// [`PROTOCOL_VERSION`] of the daemon.
     pub protocol: u32,
-    /// Zero.
-    pub reserved: u32,
+    /// 1 while the journal cannot be written (a full disk):
+    /// acknowledgements wait until it can.
+    pub journal_failing: u32,
     /// Differs for every start of a daemon: a frontend that sees it change
     /// sends again what the new daemon has not acknowledged.
     pub instance: u64,
+    /// When this daemon started (ns since the UNIX epoch).
+    pub started_at_ns: u64,
+    /// When it last wrote a checkpoint (0: not yet, or no state directory).
+    pub checkpoint_at_ns: u64,
+    /// Bytes in the journal (0 without a state directory).
+    pub journal_bytes: u64,
+    /// Frontends heard from in the last minute.
+    pub frontends: u64,
+    /// Batch latency over the last minute, from the first message the
+    /// engine thread took to the snapshot out: median and 99th percentile
+    /// (µs; 0 without batches).
+    pub latency_p50_us: f64,
+    /// See `latency_p50_us`.
+    pub latency_p99_us: f64,
+    /// The header of the last snapshot published (its acknowledgements
+    /// are the ones below).
+    pub snapshot: SnapshotHeader,
     /// Progress of the most recent frontends.
     pub acks: [FrontendAck; MAX_FRONTENDS],
 }
 
-impl Acknowledgements {
+impl DaemonStatus {
     /// How far `frontend` has got, if it is listed.
     pub fn ack_of(&self, frontend: u32) -> Option<u64> {
         (self.acks.iter())

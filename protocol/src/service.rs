@@ -9,7 +9,7 @@ pub const DEFAULT_NAMESPACE: &str = "slamd";
 
 /// The services of one namespace: `{ns}/keyframes`, `{ns}/edges`,
 /// `{ns}/gps`, `{ns}/poses`, `{ns}/rejections`, `{ns}/switches`,
-/// `{ns}/acks`, and the events `{ns}/ingest`
+/// `{ns}/status`, and the events `{ns}/ingest`
 /// (frontends → daemon) and `{ns}/published` (daemon → subscribers).
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct ServiceNames {
@@ -25,8 +25,8 @@ pub struct ServiceNames {
     pub rejections: String,
     /// Loop-closure switches, daemon → subscribers.
     pub switches: String,
-    /// Acknowledgements, daemon → frontends.
-    pub acks: String,
+    /// The daemon's status and acknowledgements, daemon → frontends.
+    pub status: String,
     /// "New input" event, frontends → daemon.
     pub ingest: String,
     /// "New snapshot" event, daemon → subscribers.
@@ -45,7 +45,7 @@ impl ServiceNames {
             poses: n("poses"),
             rejections: n("rejections"),
             switches: n("switches"),
-            acks: n("acks"),
+            status: n("status"),
             ingest: n("ingest"),
             published: n("published"),
         }
@@ -104,9 +104,9 @@ impl Qos {
             * size_of::<Rejection>() as u64;
         let switches = (self.max_subscribers as u64 * 3 + 2)
             * (self.initial_poses * size_of::<Switch>() + size_of::<SwitchesHeader>()) as u64;
-        let acks = ((self.max_frontends + self.max_subscribers) as u64 * 3 + 2)
-            * size_of::<Acknowledgements>() as u64;
-        inputs + snapshot + rejections + switches + acks
+        let status =
+            ((self.max_frontends + self.max_subscribers) as u64 * 3 + 2) * size_of::<DaemonStatus>() as u64;
+        inputs + snapshot + rejections + switches + status
     }
 }
 

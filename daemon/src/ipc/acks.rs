@@ -19,6 +19,7 @@ use crate::store::AckState;
 use slamd_protocol::codec::Origin;
 use slamd_protocol::{FrontendAck, MAX_FRONTENDS};
 use std::collections::BTreeSet;
+use std::time::{Duration, Instant};
 
 /// Frontends remembered; beyond this the one quiet longest is forgotten.
 const TRACKED: usize = 1024;
@@ -26,13 +27,15 @@ const TRACKED: usize = 1024;
 /// Numbers kept past a gap before the gap is given up as lost.
 const MAX_BEYOND: usize = 1 << 16;
 
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug)]
 struct Seen {
     frontend: u32,
     through: u64,
     beyond: BTreeSet<u64>,
     /// Until its first batch ends: the lowest number taken.
     floor: Option<u64>,
+    /// When it was last heard from (restored ones: when restored).
+    heard: Option<Instant>,
 }
 
 /// Per-frontend acknowledgements, the most recently active last.
@@ -51,6 +54,7 @@ impl Acks {
                 through: a.through,
                 beyond: a.beyond.iter().copied().collect(),
                 floor: None,
+                heard: None,
             })
             .collect();
         Self { seen }
@@ -87,6 +91,7 @@ impl Acks {
                     through: o.sequence.saturating_sub(1),
                     beyond: BTreeSet::new(),
                     floor: Some(o.sequence),
+                    heard: None,
                 });
                 self.seen.len() - 1
             }
@@ -96,6 +101,7 @@ impl Acks {
             self.seen.push(s);
         }
         let s = self.seen.last_mut().expect("just pushed");
+        s.heard = Some(Instant::now());
         if let Some(floor) = s.floor.filter(|&f| o.sequence < f) {
             // below the first batch's start so far: the count starts lower
             s.beyond.extend(floor..=s.through);
@@ -123,6 +129,13 @@ impl Acks {
             }
         }
         true
+    }
+
+    /// Frontends heard from within `within`.
+    pub fn active(&self, within: Duration) -> usize {
+        (self.seen.iter().rev())
+            .take_while(|s| s.heard.is_some_and(|t| t.elapsed() <= within))
+            .count()
     }
 
     /// Ends every frontend's first batch.

@@ -153,6 +153,7 @@ impl EngineLoop {
             Ok(()) => {
                 self.store_failed = false;
                 self.durable = self.acks.header();
+                self.checkpoint_at_ns = super::engine_loop::now_ns();
                 tracing::debug!(seconds = t0.elapsed().as_secs_f64(), "Checkpoint written.");
             }
             Err(e) => tracing::error!(error = %e, "Cannot write a checkpoint; the journal goes on."),

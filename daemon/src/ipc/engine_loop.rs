@@ -3,6 +3,7 @@
 //! per batch (its state directory is in [`super::durable`]).
 
 use super::acks::Acks;
+use super::health::Latency;
 use super::held::{Held, Waiting};
 use crate::config::Config;
 use crate::engine::{EdgeInput, Engine, EngineError, FixInput};
@@ -16,7 +17,7 @@ use slamd_protocol::codec::Origin;
 use slamd_protocol::message::kind;
 use slamd_protocol::transport::{Outlet, TransportError};
 use slamd_protocol::{
-    Acknowledgements, FrontendAck, Rejection, RejectionReason, SnapshotHeader, SwitchesHeader, MAX_FRONTENDS,
+    DaemonStatus, FrontendAck, Rejection, RejectionReason, SnapshotHeader, SwitchesHeader, MAX_FRONTENDS,
     PROTOCOL_VERSION,
 };
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
@@ -79,6 +80,16 @@ pub struct EngineLoop {
     pub(super) last_checkpoint: Instant,
     /// This daemon start's number in the acknowledgements.
     instance: u64,
+    /// When it started (ns since the UNIX epoch).
+    started_at_ns: u64,
+    /// When it last wrote a checkpoint (ns since the UNIX epoch).
+    pub(super) checkpoint_at_ns: u64,
+    /// When the engine thread took the first message of the batch being
+    /// gathered.
+    batch_start: Option<Instant>,
+    latency: Latency,
+    /// The last snapshot's header.
+    last_header: SnapshotHeader,
     pub(super) dirty: bool,
     last_publish: Option<Instant>,
     last_input: Instant,
@@ -104,6 +115,11 @@ impl EngineLoop {
             recovering: false,
             last_checkpoint: Instant::now(),
             instance: new_instance(),
+            started_at_ns: now_ns(),
+            checkpoint_at_ns: 0,
+            batch_start: None,
+            latency: Latency::default(),
+            last_header: SnapshotHeader::default(),
             dirty: false,
             last_publish: None,
             last_input: Instant::now(),
@@ -117,13 +133,16 @@ impl EngineLoop {
     pub fn run(mut self, rx: Receiver<Msg>) -> Counters {
         let tick = Duration::from_millis(self.config.ipc.tick_ms);
         // frontends learn at once that this daemon serves them
-        self.publish_acks();
+        self.publish_status();
         loop {
             let first = match rx.recv_timeout(self.wait_time(tick)) {
                 Ok(m) => m,
                 Err(RecvTimeoutError::Timeout) => Msg::Tick,
                 Err(RecvTimeoutError::Disconnected) => break,
             };
+            if matches!(first, Msg::Keyframe(..) | Msg::Edge(..) | Msg::Gps(..)) {
+                self.batch_start.get_or_insert_with(Instant::now);
+            }
             if !self.handle(first) {
                 break;
             }
@@ -343,6 +362,8 @@ impl EngineLoop {
         if self.last_input.elapsed() >= tick {
             self.engine.idle();
         }
+        // operators (`slamd status`) read the daemon while it idles
+        self.publish_status();
         if self.engine.resolving() || self.store_failed {
             // a finished re-solve is swapped in at the next update; a
             // failed journal commit is tried again
@@ -361,7 +382,7 @@ impl EngineLoop {
         }
         // what the snapshot acknowledges is on disk first
         self.commit();
-        self.publish_acks();
+        self.publish_status();
         let t0 = Instant::now();
         let report = self.engine.update();
         let solved = t0.elapsed();
@@ -390,9 +411,16 @@ impl EngineLoop {
         let poses = snap
             .poses()
             .map(|(id, p)| wire::pose_out(id, &p, georef.as_ref()));
+        self.last_header = SnapshotHeader {
+            poses: snap.len() as u64,
+            ..header
+        };
         let result: Result<(), TransportError> = self.outlet.publish(header, snap.len(), poses);
         if let Err(e) = result {
             tracing::error!(error = %e, "Cannot publish a snapshot.");
+        }
+        if let Some(t) = self.batch_start.take() {
+            self.latency.push(t.elapsed());
         }
         tracing::debug!(
             version = report.version,
@@ -409,14 +437,22 @@ impl EngineLoop {
         self.last_publish = Some(Instant::now());
     }
 
-    fn publish_acks(&mut self) {
-        let m = Acknowledgements {
+    fn publish_status(&mut self) {
+        let (latency_p50_us, latency_p99_us) = self.latency.percentiles();
+        let m = DaemonStatus {
             protocol: PROTOCOL_VERSION,
-            reserved: 0,
+            journal_failing: u32::from(self.store_failed),
             instance: self.instance,
+            started_at_ns: self.started_at_ns,
+            checkpoint_at_ns: self.checkpoint_at_ns,
+            journal_bytes: self.store.as_ref().map_or(0, |s| s.journal_len()),
+            frontends: self.acks.active(Duration::from_secs(60)) as u64,
+            latency_p50_us,
+            latency_p99_us,
+            snapshot: self.last_header,
             acks: self.durable,
         };
-        if let Err(e) = self.outlet.publish_acks(m) {
+        if let Err(e) = self.outlet.publish_status(m) {
             tracing::error!(error = %e, "Cannot publish the acknowledgements.");
         }
     }
@@ -452,11 +488,15 @@ impl EngineLoop {
     }
 }
 
+/// Nanoseconds since the UNIX epoch.
+pub(super) fn now_ns() -> u64 {
+    SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map_or(0, |d| d.as_nanos() as u64)
+}
+
 /// A number for this daemon start, nonzero and different from the last
 /// start's: the clock's nanoseconds mixed with the process id.
 fn new_instance() -> u64 {
-    let ns = SystemTime::now()
-        .duration_since(UNIX_EPOCH)
-        .map_or(0, |d| d.as_nanos() as u64);
-    (ns ^ u64::from(std::process::id()).rotate_left(32)).max(1)
+    (now_ns() ^ u64::from(std::process::id()).rotate_left(32)).max(1)
 }

@@ -13,6 +13,7 @@
 mod acks;
 mod durable;
 pub(crate) mod engine_loop;
+mod health;
 mod held;
 mod server;
 

@@ -288,6 +288,11 @@ impl StateDir {
         Ok(())
     }
 
+    /// Bytes in the journal file.
+    pub fn journal_len(&self) -> u64 {
+        self.journal.len()
+    }
+
     /// Whether the journal has grown past its checkpoint size.
     pub fn journal_full(&self) -> bool {
         self.journal.len() >= self.config.checkpoint_journal_mib << 20

@@ -5,7 +5,7 @@
 use super::services::{self, Access, Event, Namespace, Topic};
 use super::{node, shm, TransportError};
 use crate::message::{
-    Acknowledgements, Edge, GpsFix, Keyframe, Pose, Rejection, SnapshotHeader, Switch, SwitchesHeader,
+    DaemonStatus, Edge, GpsFix, Keyframe, Pose, Rejection, SnapshotHeader, Switch, SwitchesHeader,
 };
 use crate::service::Qos;
 use iceoryx2::port::listener::Listener;
@@ -66,7 +66,7 @@ struct Services {
     _poses: Topic<[Pose], SnapshotHeader>,
     _rejections: Topic<Rejection>,
     _switches: Topic<[Switch], SwitchesHeader>,
-    _acks: Topic<Acknowledgements>,
+    _status: Topic<DaemonStatus>,
     _ingest: Event,
     _published: Event,
 }
@@ -87,7 +87,7 @@ impl Ingress {
         let poses = services::poses(&node, &ns, access)?;
         let rejections = services::rejections(&node, &ns, access)?;
         let switches = services::switches(&node, &ns, access)?;
-        let acks = services::acks(&node, &ns, access)?;
+        let status = services::status(&node, &ns, access)?;
         let ingest = services::ingest(&node, &ns, access)?;
         let published = services::published(&node, &ns, access)?;
         let names = &ns.services;
@@ -121,7 +121,7 @@ impl Ingress {
                 _poses: poses,
                 _rejections: rejections,
                 _switches: switches,
-                _acks: acks,
+                _status: status,
                 _ingest: ingest,
                 _published: published,
             },
@@ -215,7 +215,7 @@ pub struct Outlet {
     published: Notifier<ipc::Service>,
     rejections: Publisher<ipc::Service, Rejection, ()>,
     switches: Publisher<ipc::Service, [Switch], SwitchesHeader>,
-    acks: Publisher<ipc::Service, Acknowledgements, ()>,
+    status: Publisher<ipc::Service, DaemonStatus, ()>,
 }
 
 impl Outlet {
@@ -246,17 +246,17 @@ impl Outlet {
             .notifier_builder()
             .create()
             .map_err(|e| ns.fail("open", &names.published, &e))?;
-        let acks = services::acks(&node, &ns, Access::Open)?
+        let status = services::status(&node, &ns, Access::Open)?
             .publisher_builder()
             .create()
-            .map_err(|e| ns.fail("open", &names.acks, &e))?;
+            .map_err(|e| ns.fail("open", &names.status, &e))?;
         Ok(Self {
             _node: node,
             poses,
             published,
             rejections,
             switches,
-            acks,
+            status,
         })
     }
 
@@ -293,13 +293,13 @@ impl Outlet {
         send_slice(&self.switches, header, count, switches, "switches")
     }
 
-    /// Publishes the acknowledgements (before the snapshot that carries
-    /// the same).
-    pub fn publish_acks(&self, m: Acknowledgements) -> Result<(), TransportError> {
-        self.acks
+    /// Publishes the daemon's status with its acknowledgements (before the
+    /// snapshot that carries the same).
+    pub fn publish_status(&self, m: DaemonStatus) -> Result<(), TransportError> {
+        self.status
             .send_copy(m)
             .map(|_| ())
-            .map_err(|e| TransportError::other("send acknowledgements", e))
+            .map_err(|e| TransportError::other("send status", e))
     }
 
     /// Publishes a rejection.

@@ -2,7 +2,7 @@
 
 use super::services::{self, Access, Namespace};
 use super::{node, TransportError};
-use crate::message::{Acknowledgements, Edge, GpsFix, Keyframe};
+use crate::message::{DaemonStatus, Edge, GpsFix, Keyframe};
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
@@ -19,7 +19,7 @@ pub struct FrontendLink {
     edges: Publisher<ipc::Service, Edge, ()>,
     gps: Publisher<ipc::Service, GpsFix, ()>,
     ingest: Notifier<ipc::Service>,
-    acks: Subscriber<ipc::Service, Acknowledgements, ()>,
+    status: Subscriber<ipc::Service, DaemonStatus, ()>,
 }
 
 impl FrontendLink {
@@ -56,10 +56,10 @@ impl FrontendLink {
             .notifier_builder()
             .create()
             .map_err(|e| ns.fail("open", &names.ingest, &e))?;
-        let acks = services::acks(&node, &ns, Access::Open)?
+        let status = services::status(&node, &ns, Access::Open)?
             .subscriber_builder()
             .create()
-            .map_err(|e| ns.fail("open", &names.acks, &e))?;
+            .map_err(|e| ns.fail("open", &names.status, &e))?;
         Ok(Self {
             _node: node,
             ns,
@@ -67,7 +67,7 @@ impl FrontendLink {
             edges,
             gps,
             ingest,
-            acks,
+            status,
         })
     }
 
@@ -95,14 +95,14 @@ impl FrontendLink {
             .map_err(|e| self.ns.fail("send on", &self.ns.services.gps, &e))
     }
 
-    /// The newest acknowledgements delivered since the last call, if any
+    /// The newest daemon status delivered since the last call, if any
     /// (never blocks).
-    pub fn latest_acks(&self) -> Result<Option<Acknowledgements>, TransportError> {
+    pub fn latest_status(&self) -> Result<Option<DaemonStatus>, TransportError> {
         let mut newest = None;
         while let Some(s) = self
-            .acks
+            .status
             .receive()
-            .map_err(|e| TransportError::other("receive acknowledgements", e))?
+            .map_err(|e| TransportError::other("receive status", e))?
         {
             newest = Some(*s.payload());
         }

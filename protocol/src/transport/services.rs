@@ -10,7 +10,7 @@
 use super::classify::{classify, Explain};
 use super::{protocol_attributes, service_name, TransportError};
 use crate::message::{
-    Acknowledgements, Edge, GpsFix, Keyframe, Pose, Rejection, SnapshotHeader, Switch, SwitchesHeader,
+    DaemonStatus, Edge, GpsFix, Keyframe, Pose, Rejection, SnapshotHeader, Switch, SwitchesHeader,
 };
 use crate::service::{Qos, ServiceNames};
 use iceoryx2::prelude::*;
@@ -196,19 +196,19 @@ pub(crate) fn rejections(
     })
 }
 
-/// Acknowledgements, daemon → frontends. Created with one publisher,
+/// DaemonStatus, daemon → frontends. Created with one publisher,
 /// subscribers for every frontend and every snapshot subscriber, each
 /// keeping only the newest (buffer 1, safe overflow), and a history of 1
 /// so a frontend learns at once which daemon serves it.
-pub(crate) fn acks(
+pub(crate) fn status(
     node: &Node<ipc::Service>,
     ns: &Namespace,
     access: Access,
-) -> Result<Topic<Acknowledgements>, TransportError> {
-    let name = &ns.services.acks;
+) -> Result<Topic<DaemonStatus>, TransportError> {
+    let name = &ns.services.status;
     let builder = node
         .service_builder(&service_name(name)?)
-        .publish_subscribe::<Acknowledgements>();
+        .publish_subscribe::<DaemonStatus>();
     topic(builder, ns, name, access, |q| TopicSizes {
         publishers: 1,
         subscribers: q.max_frontends + q.max_subscribers,

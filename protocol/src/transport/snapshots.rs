@@ -2,7 +2,7 @@
 
 use super::services::{self, Access, Namespace};
 use super::{node, TransportError};
-use crate::message::{Pose, Rejection, SnapshotHeader, Switch, SwitchesHeader};
+use crate::message::{DaemonStatus, Pose, Rejection, SnapshotHeader, Switch, SwitchesHeader};
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
@@ -51,6 +51,7 @@ pub struct SnapshotLink {
     switches: Subscriber<ipc::Service, [Switch], SwitchesHeader>,
     published: Listener<ipc::Service>,
     rejections: Subscriber<ipc::Service, Rejection, ()>,
+    status: Subscriber<ipc::Service, DaemonStatus, ()>,
 }
 
 impl SnapshotLink {
@@ -75,12 +76,17 @@ impl SnapshotLink {
             .listener_builder()
             .create()
             .map_err(|e| ns.fail("open", &names.published, &e))?;
+        let status = services::status(&node, &ns, Access::Open)?
+            .subscriber_builder()
+            .create()
+            .map_err(|e| ns.fail("open", &names.status, &e))?;
         Ok(Self {
             _node: node,
             poses,
             switches,
             published,
             rejections,
+            status,
         })
     }
 
@@ -127,6 +133,21 @@ impl SnapshotLink {
             .map_err(|e| TransportError::other("receive switches", e))?
         {
             newest = Some(SwitchesSample(s));
+        }
+        Ok(newest)
+    }
+
+    /// The newest daemon status delivered since the last call, if any
+    /// (never blocks; one is published with every snapshot, and a new
+    /// subscriber gets the last one).
+    pub fn status(&self) -> Result<Option<DaemonStatus>, TransportError> {
+        let mut newest = None;
+        while let Some(s) = self
+            .status
+            .receive()
+            .map_err(|e| TransportError::other("receive status", e))?
+        {
+            newest = Some(*s.payload());
         }
         Ok(newest)
     }

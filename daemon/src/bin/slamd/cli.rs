@@ -26,4 +26,6 @@ pub enum Command {
     Eval(crate::eval::EvalOpts),
     /// Write a saved map (a state directory's `map`) as a g2o graph.
     Export(crate::export::ExportOpts),
+    /// Show a running daemon's health: map, input, snapshot, latency, journal.
+    Status(crate::status::StatusOpts),
 }

@@ -10,6 +10,7 @@ mod replay;
 mod robust;
 mod run;
 mod solve;
+mod status;
 mod synth;
 mod telemetry;
 
@@ -25,6 +26,7 @@ fn main() -> ExitCode {
         cli::Command::Solve(opts) => solve::run(opts),
         cli::Command::Eval(opts) => eval::run(opts),
         cli::Command::Export(opts) => export::run(opts),
+        cli::Command::Status(opts) => status::run(opts),
         cli::Command::Synth(opts) => synth::run(opts),
         cli::Command::Demo(opts) => demo::run(opts),
         cli::Command::Replay(opts) => replay::run(opts),
