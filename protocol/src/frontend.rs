@@ -186,12 +186,12 @@ impl Frontend {
         let acked = a.ack_of(self.id).unwrap_or(0);
         self.forget_through(acked);
         if a.instance != self.instance {
-            let first = self.instance == 0;
+            // also at the first status seen: a daemon that died before this
+            // frontend heard from it got messages it never took; what the
+            // same daemon already has is dropped there as a repeat
             self.instance = a.instance;
             self.acked = acked;
-            if !first {
-                self.send_again()?;
-            }
+            self.send_again()?;
         }
         Ok(())
     }

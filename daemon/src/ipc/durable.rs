@@ -14,7 +14,7 @@ use super::engine_loop::EngineLoop;
 use crate::engine::{Engine, EngineError};
 use crate::geometry::Pose2;
 use crate::store::{Cut, MapEdge, MapFile, MapKeyframe, Record, StateDir};
-use slamd_types::KeyframeId;
+use slamd_types::{check_covariance, KeyframeId};
 use std::collections::{HashMap, HashSet};
 use std::time::{Duration, Instant};
 
@@ -202,6 +202,7 @@ impl Fold {
                     self.record(map, w);
                 }
             }
+            Record::Edge(_, e) if e.from == e.to => self.refused += 1,
             Record::Edge(o, e) => match [e.from, e.to].into_iter().find(|k| !self.ids.contains(k)) {
                 Some(missing) => self.waiting.entry(missing).or_default().push(r),
                 None => map.edges.push(MapEdge {
@@ -211,6 +212,7 @@ impl Fold {
                     origin: o,
                 }),
             },
+            Record::Fix(_, f) if check_covariance(f.covariance).is_err() => self.refused += 1,
             Record::Fix(_, f) => {
                 if self.ids.contains(&f.keyframe) {
                     map.fixes.push(f);
