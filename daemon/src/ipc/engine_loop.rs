@@ -74,8 +74,8 @@ pub struct EngineLoop {
     /// The last journal commit failed; acknowledgements wait for one that
     /// does not.
     pub(super) store_failed: bool,
-    /// Replaying the journal: nothing is journaled again and no rejection
-    /// is published.
+    /// Taking up a saved map: refusals were published before the restart
+    /// and are not published again.
     pub(super) recovering: bool,
     pub(super) last_checkpoint: Instant,
     /// This daemon start's number in the acknowledgements.
@@ -221,17 +221,15 @@ impl EngineLoop {
             self.counters.duplicates += 1;
             return false;
         }
-        if !self.recovering {
-            if let Some(store) = &mut self.store {
-                store.journal().append(&r);
-            }
+        if let Some(store) = &mut self.store {
+            store.journal().append(&r);
         }
         self.dirty = true;
         true
     }
 
     /// Applies a message taken in.
-    pub(super) fn apply(&mut self, r: Record) {
+    fn apply(&mut self, r: Record) {
         match r {
             Record::Keyframe(o, id, guess) => match self.engine.add_keyframe(id, guess) {
                 Ok(_) => {
