@@ -98,15 +98,7 @@ impl FrontendLink {
     /// The newest daemon status delivered since the last call, if any
     /// (never blocks).
     pub fn latest_status(&self) -> Result<Option<DaemonStatus>, TransportError> {
-        let mut newest = None;
-        while let Some(s) = self
-            .status
-            .receive()
-            .map_err(|e| TransportError::other("receive status", e))?
-        {
-            newest = Some(*s.payload());
-        }
-        Ok(newest)
+        super::newest(&self.status, "status")
     }
 
     /// Wakes the daemon to take what was published.

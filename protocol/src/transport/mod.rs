@@ -60,6 +60,25 @@ pub(crate) fn node(name: &str, handle_signals: bool) -> Result<Node<ipc::Service
 }
 
 /// Parses a service name.
+/// The newest sample `subscriber` was delivered since the last call,
+/// copied out, if any (never blocks): the reading of a latest-value topic.
+pub(crate) fn newest<T>(
+    subscriber: &iceoryx2::port::subscriber::Subscriber<ipc::Service, T, ()>,
+    what: &str,
+) -> Result<Option<T>, TransportError>
+where
+    T: std::fmt::Debug + Copy + ZeroCopySend,
+{
+    let mut newest = None;
+    while let Some(s) = subscriber
+        .receive()
+        .map_err(|e| TransportError::other(&format!("receive {what}"), e))?
+    {
+        newest = Some(*s.payload());
+    }
+    Ok(newest)
+}
+
 pub(crate) fn service_name(name: &str) -> Result<ServiceName, TransportError> {
     ServiceName::new(name).map_err(|e| TransportError::other(&format!("service name `{name}`"), e))
 }

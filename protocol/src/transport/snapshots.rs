@@ -141,15 +141,7 @@ impl SnapshotLink {
     /// (never blocks; one is published with every snapshot, and a new
     /// subscriber gets the last one).
     pub fn status(&self) -> Result<Option<DaemonStatus>, TransportError> {
-        let mut newest = None;
-        while let Some(s) = self
-            .status
-            .receive()
-            .map_err(|e| TransportError::other("receive status", e))?
-        {
-            newest = Some(*s.payload());
-        }
-        Ok(newest)
+        super::newest(&self.status, "status")
     }
 
     /// Every rejection delivered since the last call.
