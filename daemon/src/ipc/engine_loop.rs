@@ -362,6 +362,11 @@ impl EngineLoop {
         }
         // operators (`slamd status`) read the daemon while it idles
         self.publish_status();
+        if let Some(store) = &mut self.store {
+            if let Err(e) = store.journal().sync_if_due() {
+                tracing::error!(error = %e, "Cannot fsync the journal.");
+            }
+        }
         if self.engine.resolving() || self.store_failed {
             // a finished re-solve is swapped in at the next update; a
             // failed journal commit is tried again

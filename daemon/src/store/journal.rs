@@ -192,11 +192,6 @@ impl Journal {
         frame(&mut self.pending, &p.0);
     }
 
-    /// Whether records wait for [`Self::commit`].
-    pub fn has_pending(&self) -> bool {
-        !self.pending.is_empty()
-    }
-
     /// Writes the buffered records and syncs as the policy says (always:
     /// fsync now; interval: once the interval has passed; never: the OS
     /// decides). On failure the file is cut back to its last whole record
@@ -219,6 +214,16 @@ impl Journal {
             SyncPolicy::Never => false,
         };
         if due {
+            self.sync()?;
+        }
+        Ok(())
+    }
+
+    /// With [`SyncPolicy::Interval`], fsyncs what was written once the
+    /// interval has passed, even when no new batch comes to do it (the
+    /// daemon calls this on every tick).
+    pub fn sync_if_due(&mut self) -> Result<(), StoreError> {
+        if self.policy == SyncPolicy::Interval && self.unsynced && self.last_sync.elapsed() >= self.interval {
             self.sync()?;
         }
         Ok(())
