@@ -86,3 +86,59 @@ fn a_second_map_for_a_state_directory_is_refused() {
     assert_eq!(code, 2);
     assert!(err.contains("already holds a map"), "{err}");
 }
+
+/// `slamd run --map`'s path: a daemon started from Manhattan saved at
+/// keyframe 1,750 takes the rest of the stream from a frontend and, once
+/// input pauses, publishes the optimum 146.077.
+#[test]
+fn a_daemon_continues_a_saved_map_to_the_optimum() {
+    use slamd::engine::{Engine, EngineConfig};
+    use slamd::ipc::{Frontend, Server, Snapshots};
+    let g = read("manhattanolson3500_g2oversion.g2o");
+    let groups = g.by_newer();
+    let mut engine = Engine::new(EngineConfig::default());
+    for (k, group) in groups.iter().enumerate().take(1750) {
+        engine.add_keyframe(g.id_of(k), None).unwrap();
+        for &e in group {
+            engine.add_edge(g.edge_input(e)).unwrap();
+        }
+        engine.update();
+    }
+    let bytes = engine.map().encode();
+    drop(engine);
+    let map = MapFile::decode(std::path::Path::new("manhattan-1750"), &bytes).unwrap();
+    let config = slamd::config::Config {
+        namespace: format!("slamd-test-{}-continue", std::process::id()),
+        ..slamd::config::Config::default()
+    };
+    let server = Server::spawn_map(config.clone(), Some(map)).expect("daemon");
+    let snapshots = Snapshots::open(&config.namespace).unwrap();
+    let mut f = Frontend::connect(&config).unwrap();
+    for (k, group) in groups.iter().enumerate().skip(1750) {
+        f.add_keyframe(g.id_of(k), 0, None).unwrap();
+        let mut last = f.last_sequence();
+        for &e in group {
+            last = f.add_edge(&g.edge_input(e)).unwrap();
+        }
+        f.flush().unwrap();
+        assert!(
+            f.wait_acknowledged(last, Duration::from_secs(30)).unwrap(),
+            "keyframe {k}"
+        );
+    }
+    // the daemon re-solves once input pauses
+    let deadline = std::time::Instant::now() + Duration::from_secs(60);
+    let mut chi2 = f64::NAN;
+    while std::time::Instant::now() < deadline {
+        if let Some(s) = snapshots.wait(Duration::from_millis(500)).unwrap() {
+            assert_eq!(s.header().keyframes, 3500);
+            chi2 = s.header().chi2;
+            if (chi2 - 146.077).abs() < 1e-3 {
+                break;
+            }
+        }
+    }
+    assert!((chi2 - 146.077).abs() < 1e-3, "final χ² {chi2}");
+    let counters = server.join().unwrap();
+    assert_eq!((counters.keyframes, counters.rejected), (3500, 0));
+}
