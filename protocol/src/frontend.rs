@@ -171,7 +171,10 @@ impl Frontend {
 
     /// Wakes the daemon to take everything published so far.
     pub fn flush(&mut self) -> Result<(), TransportError> {
-        self.poll()?;
+        // one poke for what was sent again and what was sent: a second,
+        // taken while the next keyframe is half published, would split it
+        // over two batches
+        self.refresh()?;
         self.link.poke()
     }
 
@@ -180,20 +183,30 @@ impl Frontend {
     /// has not acknowledged. Never blocks for long (a send may wait for
     /// backpressure).
     pub fn poll(&mut self) -> Result<(), TransportError> {
+        if self.refresh()? {
+            self.link.poke()?;
+        }
+        Ok(())
+    }
+
+    /// [`Self::poll`] without waking the daemon; whether anything was sent
+    /// again.
+    fn refresh(&mut self) -> Result<bool, TransportError> {
         let Some(a) = self.link.latest_status()? else {
-            return Ok(());
+            return Ok(false);
         };
         let acked = a.ack_of(self.id).unwrap_or(0);
         self.forget_through(acked);
-        if a.instance != self.instance {
-            // also at the first status seen: a daemon that died before this
-            // frontend heard from it got messages it never took; what the
-            // same daemon already has is dropped there as a repeat
-            self.instance = a.instance;
-            self.acked = acked;
-            self.send_again()?;
+        if a.instance == self.instance {
+            return Ok(false);
         }
-        Ok(())
+        // also at the first status seen: a daemon that died before this
+        // frontend heard from it got messages it never took; what the
+        // same daemon already has is dropped there as a repeat
+        self.instance = a.instance;
+        self.acked = acked;
+        self.send_again()?;
+        Ok(!self.outbox.is_empty())
     }
 
     /// Waits until the daemon has acknowledged message `sequence`, riding
@@ -262,8 +275,9 @@ impl Frontend {
         }
     }
 
-    /// Sends every kept message again, oldest first, waking the daemon as
-    /// it goes: more than its queues hold may be kept.
+    /// Sends every kept message again, oldest first, waking the daemon
+    /// every [`POKE_EVERY`] (more than its queues hold may be kept); the
+    /// caller wakes it for the rest.
     fn send_again(&mut self) -> Result<(), TransportError> {
         let started = Instant::now();
         for i in 0..self.outbox.len() {
@@ -290,7 +304,7 @@ impl Frontend {
                 self.link.poke()?;
             }
         }
-        self.link.poke()
+        Ok(())
     }
 
     /// The daemon's queue stayed full: it is gone or stuck. Waits for a
