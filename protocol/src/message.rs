@@ -247,7 +247,8 @@ pub struct SnapshotHeader {
     pub protocol: u32,
     /// Zero.
     pub reserved: u32,
-    /// Increases with every snapshot.
+    /// Increases with every snapshot of one daemon start (a restarted
+    /// daemon counts again; its status names the start).
     pub version: u64,
     /// Number of poses that follow.
     pub poses: u64,
