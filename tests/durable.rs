@@ -97,13 +97,7 @@ fn a_daemon_continues_a_saved_map_to_the_optimum() {
     let g = read("manhattanolson3500_g2oversion.g2o");
     let groups = g.by_newer();
     let mut engine = Engine::new(EngineConfig::default());
-    for (k, group) in groups.iter().enumerate().take(1750) {
-        engine.add_keyframe(g.id_of(k), None).unwrap();
-        for &e in group {
-            engine.add_edge(g.edge_input(e)).unwrap();
-        }
-        engine.update();
-    }
+    slamd_tests::feed(&mut engine, &g, 0..1750);
     let bytes = engine.map().encode();
     drop(engine);
     let map = MapFile::decode(std::path::Path::new("manhattan-1750"), &bytes).unwrap();

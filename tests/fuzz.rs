@@ -338,15 +338,8 @@ proptest! {
 fn small_map() -> slamd::store::MapFile {
     use slamd::engine::{Engine, EngineConfig, FixInput};
     let g = slamd_tests::read("manhattanolson3500_g2oversion.g2o");
-    let groups = g.by_newer();
     let mut engine = Engine::new(EngineConfig::default());
-    for (k, group) in groups.iter().enumerate().take(12) {
-        engine.add_keyframe(g.id_of(k), None).unwrap();
-        for &e in group {
-            engine.add_edge(g.edge_input(e)).unwrap();
-        }
-        engine.update();
-    }
+    slamd_tests::feed(&mut engine, &g, 0..12);
     let position = slamd::gps::Geodetic::new(45.0, 9.0, 100.0).unwrap();
     let fix = FixInput {
         keyframe: 3,

@@ -3,9 +3,8 @@
 //! stopped.
 
 use slamd::engine::{Engine, EngineConfig};
-use slamd::graph::PoseGraph;
 use slamd::store::MapFile;
-use slamd_tests::{max_pose_error, read};
+use slamd_tests::{feed, max_pose_error, read};
 use std::path::Path;
 
 /// Inline re-solves, and every keyframe's step back-substituted (with
@@ -17,18 +16,6 @@ fn deterministic() -> EngineConfig {
         background: false,
         wildfire_threshold: 0.0,
         ..EngineConfig::default()
-    }
-}
-
-/// Feeds keyframes `range` of `g` (each with its edges to older ones).
-fn feed(engine: &mut Engine, g: &PoseGraph, range: std::ops::Range<usize>) {
-    let groups = g.by_newer();
-    for k in range {
-        engine.add_keyframe(g.id_of(k), None).unwrap();
-        for &e in &groups[k] {
-            engine.add_edge(g.edge_input(e)).unwrap();
-        }
-        engine.update();
     }
 }
 

@@ -125,6 +125,21 @@ pub fn run_json(args: &[&str]) -> serde_json::Value {
     serde_json::from_str(out.trim()).unwrap_or_else(|e| panic!("not JSON ({e}): {out}"))
 }
 
+/// Feeds keyframes `range` of `g` to `engine`, each with its edges to
+/// older ones ([`PoseGraph::by_newer`]) and one update.
+pub fn feed(engine: &mut Engine, g: &PoseGraph, range: std::ops::Range<usize>) {
+    let groups = g.by_newer();
+    for k in range {
+        engine.add_keyframe(g.id_of(k), None).expect("a new keyframe");
+        for &e in &groups[k] {
+            engine
+                .add_edge(g.edge_input(e))
+                .expect("an edge between known keyframes");
+        }
+        engine.update();
+    }
+}
+
 /// Feeds `g` keyframe by keyframe, each with its edges
 /// ([`PoseGraph::by_newer`]) and one update, then calls `each(k, engine)`.
 /// Returns the engine and, per engine edge index, the graph edge it came
