@@ -255,6 +255,47 @@ fn the_daemon_publishes_each_loop_closures_switch() {
     assert!(daemon.stop().success());
 }
 
+/// A square of 4 × 10 exact, certain steps (σ ≈ 3 cm) closed by a loop
+/// closure 10 m off, of `kind`: the switch it ends with after the closing re-solve and the
+/// last keyframe's distance from the first.
+fn square_closed_wrongly(kind: EdgeKind) -> (f64, f64) {
+    let step = Pose2::new(1.0, 0.0, 0.0);
+    let corner = Pose2::new(1.0, 0.0, std::f64::consts::FRAC_PI_2);
+    let mut engine = Engine::new(EngineConfig {
+        background: false,
+        ..EngineConfig::default()
+    });
+    for k in 0..=40u64 {
+        engine.add_keyframe(k, None).unwrap();
+        if k > 0 {
+            let m = if k % 10 == 0 { corner } else { step };
+            let certain = Information::identity().scaled(1000.0);
+            let e = EdgeInput::new(k - 1, k, m, certain, EdgeKind::Odometry);
+            engine.add_edge(e).unwrap();
+        }
+        engine.update();
+    }
+    let wrong = EdgeInput::new(40, 0, Pose2::new(10.0, 0.0, 0.0), Information::identity(), kind);
+    let e = engine.add_edge(wrong).unwrap();
+    engine.update();
+    engine.resolve_now();
+    let p40 = engine.snapshot().pose(40).unwrap();
+    (engine.switches()[e], p40.position().norm())
+}
+
+#[test]
+fn a_trusted_loop_closure_is_never_switched_off() {
+    // a candidate 10 m off an exact square is switched off (what is left
+    // of its weight, s², moves the square's end by centimetres)
+    let (switch, gap) = square_closed_wrongly(EdgeKind::LoopClosure);
+    assert!(switch < REJECTED_BELOW, "candidate's switch {switch}");
+    assert!(gap < 0.5, "keyframe 40 is {gap} m from keyframe 0");
+    // trusted, the same edge keeps its whole weight and pulls the map
+    let (switch, gap) = square_closed_wrongly(EdgeKind::TrustedLoopClosure);
+    assert_eq!(switch, 1.0);
+    assert!(gap > 5.0, "keyframe 40 is {gap} m from keyframe 0");
+}
+
 /// A square loop of 200 one-metre steps whose odometry turns 0.005 rad too
 /// far each step, then 60 steps along the first side again, each with an
 /// exact loop closure to the keyframe 200 back. Odometry has unit

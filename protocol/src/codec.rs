@@ -80,6 +80,7 @@ pub fn edge_in(m: &Edge) -> Result<(Origin, EdgeInput), Rejection> {
         Some(EdgeKindWire::Odometry) => EdgeKind::Odometry,
         Some(EdgeKindWire::LoopClosure) => EdgeKind::LoopClosure,
         Some(EdgeKindWire::Other) => EdgeKind::Other,
+        Some(EdgeKindWire::TrustedLoopClosure) => EdgeKind::TrustedLoopClosure,
         None => {
             return bad(
                 RejectionReason::BadKind,
@@ -204,6 +205,7 @@ pub fn edge_out(e: &EdgeInput, o: Origin) -> Edge {
             EdgeKind::Odometry => EdgeKindWire::Odometry,
             EdgeKind::LoopClosure => EdgeKindWire::LoopClosure,
             EdgeKind::Other => EdgeKindWire::Other,
+            EdgeKind::TrustedLoopClosure => EdgeKindWire::TrustedLoopClosure,
         } as u32,
         frontend: o.frontend,
         sequence: o.sequence,
@@ -286,6 +288,16 @@ mod tests {
         );
         assert_eq!(back.measurement, Pose2::new(1.0, 0.0, 0.1));
         assert_eq!(back.kind, EdgeKind::LoopClosure);
+        // every kind survives the wire, the trusted mark included
+        for kind in [
+            EdgeKind::Odometry,
+            EdgeKind::LoopClosure,
+            EdgeKind::TrustedLoopClosure,
+            EdgeKind::Other,
+        ] {
+            let sent = EdgeInput { kind, ..back };
+            assert_eq!(edge_in(&edge_out(&sent, o)).unwrap().1.kind, kind);
+        }
     }
 
     #[test]

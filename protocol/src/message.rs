@@ -26,6 +26,8 @@ pub enum EdgeKindWire {
     LoopClosure = 1,
     /// Anything else.
     Other = 2,
+    /// A loop closure the outlier filter never switches off.
+    TrustedLoopClosure = 3,
 }
 
 impl EdgeKindWire {
@@ -35,6 +37,7 @@ impl EdgeKindWire {
             0 => Some(Self::Odometry),
             1 => Some(Self::LoopClosure),
             2 => Some(Self::Other),
+            3 => Some(Self::TrustedLoopClosure),
             _ => None,
         }
     }
@@ -421,7 +424,8 @@ mod tests {
             assert_eq!(RejectionReason::from_u32(r as u32), r);
         }
         assert_eq!(RejectionReason::from_u32(999), RejectionReason::Unknown);
-        assert_eq!(EdgeKindWire::from_u32(3), None);
+        assert_eq!(EdgeKindWire::from_u32(3), Some(EdgeKindWire::TrustedLoopClosure));
+        assert_eq!(EdgeKindWire::from_u32(4), None);
     }
 
     #[test]

@@ -5,15 +5,21 @@ use crate::{Geodetic, Information, Pose2};
 /// A keyframe's id, chosen by the frontend (unique per map).
 pub type KeyframeId = u64;
 
-/// What produced an edge. The outlier filter never switches odometry.
+/// What produced an edge. The outlier filter never switches odometry nor
+/// a trusted loop closure; every other edge is a candidate it may switch
+/// off.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum EdgeKind {
     /// Consecutive keyframes, from the frontend's odometry.
     #[default]
     Odometry,
-    /// A place-recognition match between distant keyframes.
+    /// A place-recognition match between distant keyframes: a candidate
+    /// for the outlier filter.
     LoopClosure,
+    /// A loop closure the frontend vouches for (verified geometrically, or
+    /// set by hand): never switched off.
+    TrustedLoopClosure,
     /// Anything else (a prior, a manual constraint).
     Other,
 }

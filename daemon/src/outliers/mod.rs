@@ -132,9 +132,10 @@ impl OutlierConfig {
         dcs(edge.information.mahalanobis(&e), self.arrival_phi)
     }
 
-    /// Whether `edge` gets a switch: every edge but odometry, when enabled.
+    /// Whether `edge` gets a switch: every edge but odometry and trusted
+    /// loop closures, when enabled.
     pub fn switchable(&self, edge: &Edge) -> bool {
-        self.enabled && edge.kind != EdgeKind::Odometry
+        self.enabled && !matches!(edge.kind, EdgeKind::Odometry | EdgeKind::TrustedLoopClosure)
     }
 }
 

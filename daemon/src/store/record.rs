@@ -120,6 +120,7 @@ pub(super) fn put_edge(p: &mut Put, e: &EdgeInput) {
         EdgeKind::Odometry => 0,
         EdgeKind::LoopClosure => 1,
         EdgeKind::Other => 2,
+        EdgeKind::TrustedLoopClosure => 3,
     });
     p.f64s(&e.measurement.to_array());
     p.f64s(&e.information.upper());
@@ -132,6 +133,7 @@ pub(super) fn get_edge(g: &mut Get<'_>) -> Result<EdgeInput, StoreError> {
         0 => EdgeKind::Odometry,
         1 => EdgeKind::LoopClosure,
         2 => EdgeKind::Other,
+        3 => EdgeKind::TrustedLoopClosure,
         k => {
             return Err(StoreError::Malformed(format!(
                 "edge {from}→{to}: unknown kind {k}"
