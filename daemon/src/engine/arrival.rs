@@ -96,3 +96,87 @@ impl ArrivalGate {
         std::mem::take(&mut self.drifted)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::graph::{EdgeKind, Information};
+
+    fn closure(from: usize, to: usize, z: Pose2) -> Edge {
+        Edge {
+            from,
+            to,
+            measurement: z,
+            information: Information::identity(),
+            kind: EdgeKind::LoopClosure,
+        }
+    }
+
+    /// The true map: keyframe `k` at `(k, 0)`. The estimate of keyframe
+    /// `j` carries the rigid drift `(2, −1, 0.3 rad)`; the loop closure from
+    /// `j − 100` measures the truth. Returns it and the two estimates.
+    fn drifted(j: usize) -> (Edge, Pose2, Pose2) {
+        let truth = |k: usize| Pose2::new(k as f64, 0.0, 0.0);
+        let z = truth(j - 100).between(&truth(j));
+        let drift = Pose2::new(2.0, -1.0, 0.3);
+        (closure(j - 100, j, z), truth(j - 100), drift.compose(&truth(j)))
+    }
+
+    #[test]
+    fn a_loop_closure_enters_with_dcs_at_the_estimate() {
+        let gate = ArrivalGate::new(OutlierConfig::default());
+        let e = closure(0, 5, Pose2::new(5.0, 0.0, 0.0));
+        // x_j = (5, d, 0) gives the error (0, d, 0): χ² = d², and
+        // s = min(1, 2Φ / (Φ + χ²)) with Φ = 16.27
+        let at = |d: f64| gate.switch(&e, &Pose2::IDENTITY, &Pose2::new(5.0, d, 0.0));
+        assert_eq!(at(3.0), 1.0);
+        assert!((at(10.0) - 32.54 / 116.27).abs() < 1e-12, "{}", at(10.0));
+        assert!((at(60.0) - 32.54 / 3616.27).abs() < 1e-12, "{}", at(60.0));
+        // below 0.05 the run judges it; 0.28 stays as it is
+        assert!(gate.judges(at(60.0)) && !gate.judges(at(10.0)));
+    }
+
+    #[test]
+    fn two_vouched_members_of_a_run_enter_together_and_one_waits() {
+        let mut gate = ArrivalGate::new(OutlierConfig::default());
+        let (e, xi, xj) = drifted(100);
+        assert_eq!(gate.rejected(7, true, &e, &xi, &xj), Verdict::Stays);
+        // an unvouched member between them neither enters nor breaks the run
+        let (e, xi, xj) = drifted(101);
+        assert_eq!(gate.rejected(8, false, &e, &xi, &xj), Verdict::Stays);
+        let (e, xi, xj) = drifted(102);
+        assert_eq!(gate.rejected(9, true, &e, &xi, &xj), Verdict::EnterWith(vec![7, 9]));
+        // the run ended: a vouched loop closure that disagrees with the drift
+        // (its keyframe 5 m off the drifted chain) waits alone
+        let (e, xi, xj) = drifted(103);
+        let off = Pose2::new(5.0, 0.0, 0.0).compose(&xj);
+        assert_eq!(gate.rejected(10, true, &e, &xi, &off), Verdict::Stays);
+        let (e, xi, xj) = drifted(104);
+        assert_eq!(gate.rejected(11, true, &e, &xi, &xj), Verdict::Stays);
+        assert!(!gate.take_drifted());
+    }
+
+    #[test]
+    fn a_run_of_drift_run_rejections_says_the_map_drifted_once() {
+        let config = OutlierConfig {
+            drift_run: 5,
+            ..OutlierConfig::default()
+        };
+        let mut gate = ArrivalGate::new(config);
+        for n in 0..4 {
+            let (e, xi, xj) = drifted(100 + n);
+            gate.rejected(n, false, &e, &xi, &xj);
+        }
+        assert!(!gate.take_drifted());
+        let (e, xi, xj) = drifted(104);
+        gate.rejected(4, false, &e, &xi, &xj);
+        assert!(gate.take_drifted());
+        assert!(!gate.take_drifted());
+        // the run starts over: four more do not say it again
+        for n in 5..9 {
+            let (e, xi, xj) = drifted(100 + n);
+            gate.rejected(n, false, &e, &xi, &xj);
+        }
+        assert!(!gate.take_drifted());
+    }
+}
