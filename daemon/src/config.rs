@@ -62,6 +62,12 @@ use std::time::Duration;
 /// commands' `--config`).
 pub const FILE_VARIABLE: &str = "SLAMD_CONFIG";
 
+/// `SLAMD_*` variables that are not settings: the configuration file, and
+/// those of slamd's tests and bench scripts (the datasets' directory, the
+/// binary a script runs). Any other `SLAMD_*` variable must name a
+/// setting, so a typo is an error, not silently ignored.
+pub const NOT_SETTINGS: [&str; 3] = [FILE_VARIABLE, "SLAMD_DATASETS", "SLAMD_BIN"];
+
 /// Why the configuration cannot be used.
 #[derive(Debug)]
 pub struct ConfigError(String);
@@ -191,12 +197,16 @@ impl Config {
     }
 
     /// [`Self::load`] with the environment given. `SLAMD_CONFIG` names the
-    /// file (the command line reads it), so it is not a setting.
+    /// file (the command line reads it); it and the rest of
+    /// [`NOT_SETTINGS`] are not settings.
     fn load_with_env(
         file: Option<&Path>,
         env: impl IntoIterator<Item = (String, String)>,
     ) -> Result<Config, ConfigError> {
-        let env: config::Map<String, String> = env.into_iter().filter(|(k, _)| k != FILE_VARIABLE).collect();
+        let env: config::Map<String, String> = env
+            .into_iter()
+            .filter(|(k, _)| !NOT_SETTINGS.contains(&k.as_str()))
+            .collect();
         let err = |e: config::ConfigError| ConfigError(e.to_string());
         let mut builder =
             config::Config::builder().add_source(config::Config::try_from(&Config::default()).map_err(err)?);
@@ -317,11 +327,14 @@ mod tests {
     use super::*;
 
     /// `SLAMD_CONFIG` names the file (`--config`); it is not a setting
-    /// named `config`.
+    /// named `config`, nor are the datasets' directory and the binary the
+    /// bench scripts read.
     #[test]
     fn the_file_variable_is_not_a_setting() {
         let env = [
             (FILE_VARIABLE.to_string(), "/nowhere/slamd.toml".to_string()),
+            ("SLAMD_DATASETS".to_string(), "/data".to_string()),
+            ("SLAMD_BIN".to_string(), "/opt/slamd".to_string()),
             ("SLAMD_ENGINE__RESOLVE_EVERY_EDGES".to_string(), "7".to_string()),
         ];
         let c = Config::load_with_env(None, env).unwrap();
