@@ -64,3 +64,28 @@ fn a_map_that_breaks_the_graph_is_refused() {
     let err = Engine::restore(deterministic(), &map, false).err().unwrap();
     assert!(err.to_string().contains("unknown keyframe"), "{err}");
 }
+
+/// A keyframe whose edges never came (its frontend died between the two)
+/// is the newest and not in the estimate: the map is still saved, and the
+/// restored engine holds it, unjoined, and joins it when its edge comes.
+#[test]
+fn a_map_saved_with_an_unjoined_newest_keyframe_restores() {
+    let g = read("manhattanolson3500_g2oversion.g2o");
+    let mut engine = Engine::new(deterministic());
+    feed(&mut engine, &g, 0..200);
+    engine.add_keyframe(g.id_of(200), None).unwrap();
+    engine.update();
+    let saved = engine.map();
+    assert_eq!(saved.keyframes.len(), 201);
+    assert!(!saved.keyframes[200].joined);
+    let map = MapFile::decode(Path::new("unjoined.map"), &saved.encode()).unwrap();
+    let mut restored = Engine::restore(deterministic(), &map, false).unwrap();
+    restored.update();
+    assert_eq!(restored.snapshot().len(), 200);
+    let odometry = g.by_newer()[200].clone();
+    for e in odometry {
+        restored.add_edge(g.edge_input(e)).unwrap();
+    }
+    restored.update();
+    assert_eq!(restored.snapshot().len(), 201);
+}

@@ -141,12 +141,15 @@ fn fix_of(f: &FixInput, model: &Model, frame: Option<LocalFrame>) -> Result<GpsF
 /// the held messages are the daemon's to fill in).
 pub(super) fn map_of(state: &State, origin: Option<Geodetic>, fixes: &[FixInput]) -> MapFile {
     let m = &state.model;
+    let (estimate, lin) = (state.estimate(), state.linearisation());
+    // the linearisation covers the keyframes up to the newest joined one: a
+    // keyframe whose edges never came (its frontend died) has none
     let keyframes = (m.graph.keyframes().iter().enumerate())
         .map(|(k, kf)| MapKeyframe {
             id: kf.id,
             guess: kf.guess,
-            estimate: state.estimate()[k],
-            lin: state.linearisation()[k],
+            estimate: estimate[k],
+            lin: lin.get(k).copied().unwrap_or(estimate[k]),
             joined: m.joined[k],
         })
         .collect();
