@@ -18,6 +18,8 @@ use std::time::Instant;
 #[derive(Default)]
 pub struct Background {
     job: Option<Job>,
+    /// Called when a job's outcome is ready.
+    waker: Option<resolve::Waker>,
     log: Vec<(u64, Op)>,
     /// The next op's number.
     seq: u64,
@@ -27,6 +29,12 @@ pub struct Background {
 }
 
 impl Background {
+    /// Calls `waker` (on the job's thread) whenever a job's outcome is
+    /// ready.
+    pub fn wake_with(&mut self, waker: resolve::Waker) {
+        self.waker = Some(waker);
+    }
+
     /// Whether a job runs.
     pub fn running(&self) -> bool {
         self.job.is_some()
@@ -61,7 +69,8 @@ impl Background {
         let (model, estimate) = (state.model().clone(), state.estimate().to_vec());
         self.log.clear();
         self.hinted = state.model.graph.len();
-        self.job = Some(Job::spawn(model, estimate, config.clone(), polish));
+        let waker = self.waker.clone();
+        self.job = Some(Job::spawn(model, estimate, config.clone(), polish, waker));
     }
 
     /// The finished job's outcome and the ops applied since it started.

@@ -296,6 +296,13 @@ impl Engine {
         }
     }
 
+    /// Calls `wake` on the re-solve's thread whenever a background
+    /// re-solve has finished, so the caller can [`Self::update`] at once
+    /// to swap it in rather than at its next update.
+    pub fn wake_on_resolved(&mut self, wake: impl Fn() + Send + Sync + 'static) {
+        self.background.wake_with(std::sync::Arc::new(wake));
+    }
+
     /// True while a re-solve runs on its thread.
     pub fn resolving(&self) -> bool {
         self.background.running()

@@ -24,6 +24,10 @@ use std::sync::Arc;
 use std::thread::JoinHandle;
 use std::time::Instant;
 
+/// Called on a re-solve's thread when its outcome is ready (the daemon
+/// wakes its engine loop with it, so the outcome swaps in at once).
+pub type Waker = Arc<dyn Fn() + Send + Sync>;
+
 /// What a finished re-solve hands back.
 pub struct Outcome {
     /// The fresh state, caught up to `last_seq`.
@@ -54,8 +58,15 @@ pub struct Job {
 }
 
 impl Job {
-    /// Starts a re-solve of `model` from `estimate` on a new thread.
-    pub fn spawn(model: Model, estimate: Vec<Pose2>, config: EngineConfig, polish: Polish) -> Job {
+    /// Starts a re-solve of `model` from `estimate` on a new thread;
+    /// `wake` is called there once its outcome is ready.
+    pub fn spawn(
+        model: Model,
+        estimate: Vec<Pose2>,
+        config: EngineConfig,
+        polish: Polish,
+        wake: Option<Waker>,
+    ) -> Job {
         let (ops, ops_rx) = channel::unbounded();
         let (done_tx, done) = channel::bounded(1);
         let stop = Arc::new(AtomicBool::new(false));
@@ -67,7 +78,11 @@ impl Job {
                 // re-solve belongs on the others
                 crate::affinity::run_in_background();
                 if let Some(outcome) = run(model, &estimate, &config, polish, &ops_rx, &stopped) {
-                    let _ = done_tx.send(outcome);
+                    if done_tx.send(outcome).is_ok() {
+                        if let Some(wake) = wake {
+                            wake();
+                        }
+                    }
                 }
             })
             .expect("spawn the re-solve thread");

@@ -37,9 +37,15 @@ pub enum Msg {
     Drained,
     /// The IPC thread's timer ticked.
     Tick,
+    /// A background re-solve finished: swapped in at once when input has
+    /// paused for [`QUIET_INPUT`], else with the next batch.
+    Resolved,
     /// Stop (SIGINT or SIGTERM).
     Shutdown,
 }
+
+/// A pause in input after which a finished re-solve is published at once.
+const QUIET_INPUT: Duration = Duration::from_millis(20);
 
 /// Counters the snapshot header reports.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -93,6 +99,8 @@ pub struct EngineLoop {
     pub(super) dirty: bool,
     last_publish: Option<Instant>,
     last_input: Instant,
+    /// Input came since the engine was last told it is idle.
+    idle_due: bool,
     /// Who sent each engine edge, by index.
     pub(super) edge_origin: Vec<Origin>,
     /// A loop closure arrived since the switches were last published.
@@ -123,6 +131,7 @@ impl EngineLoop {
             dirty: false,
             last_publish: None,
             last_input: Instant::now(),
+            idle_due: false,
             edge_origin: Vec::new(),
             new_loop_closure: false,
         }
@@ -169,13 +178,19 @@ impl EngineLoop {
     }
 
     /// How long to block: until the rate cap allows the pending snapshot,
-    /// else a tick.
+    /// else a tick, or less when input paused: the engine hears that it is
+    /// idle (and starts its re-solve) a tick after the last input, not up
+    /// to two.
     fn wait_time(&self, tick: Duration) -> Duration {
-        match (self.dirty, self.min_interval(), self.last_publish) {
-            (true, Some(min), Some(last)) => {
-                min.saturating_sub(last.elapsed()).max(Duration::from_micros(100))
-            }
+        let floor = Duration::from_micros(100);
+        let wait = match (self.dirty, self.min_interval(), self.last_publish) {
+            (true, Some(min), Some(last)) => min.saturating_sub(last.elapsed()).max(floor),
             _ => tick,
+        };
+        if self.idle_due {
+            wait.min(tick.saturating_sub(self.last_input.elapsed()).max(floor))
+        } else {
+            wait
         }
     }
 
@@ -201,6 +216,9 @@ impl EngineLoop {
             }
             Msg::Drained => self.acks.seal(),
             Msg::Tick => self.tick(),
+            // while input flows the next batch swaps it in; an update for
+            // it alone would hold up the keyframe behind it
+            Msg::Resolved => self.dirty |= self.last_input.elapsed() >= QUIET_INPUT,
             Msg::Shutdown => return false,
         }
         true
@@ -211,6 +229,7 @@ impl EngineLoop {
     fn take(&mut self, r: Record) {
         if self.admit(r) {
             self.last_input = Instant::now();
+            self.idle_due = true;
             self.apply(r);
         }
     }
@@ -358,6 +377,7 @@ impl EngineLoop {
         }
         let tick = Duration::from_millis(self.config.ipc.tick_ms);
         if self.last_input.elapsed() >= tick {
+            self.idle_due = false;
             self.engine.idle();
         }
         // operators (`slamd status`) read the daemon while it idles

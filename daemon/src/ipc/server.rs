@@ -91,6 +91,7 @@ pub fn serve_map(config: &Config, map: Option<MapFile>, stop: &AtomicBool) -> Re
     let (tx, rx) = channel::unbounded::<Msg>();
     let (ready_tx, ready_rx) = channel::bounded::<Result<(), ServeError>>(1);
     let engine_config = config.clone();
+    let resolved = tx.clone();
     let engine = std::thread::Builder::new()
         .name("slamd-engine".into())
         .spawn(move || {
@@ -106,6 +107,10 @@ pub fn serve_map(config: &Config, map: Option<MapFile>, stop: &AtomicBool) -> Re
                 }
             };
             let mut engine_loop = EngineLoop::new(engine_config, outlet);
+            // a finished re-solve is published at once, not at the next tick
+            engine_loop.engine.wake_on_resolved(move || {
+                let _ = resolved.send(Msg::Resolved);
+            });
             match engine_loop.take_up(start) {
                 Ok(()) => {
                     let _ = ready_tx.send(Ok(()));
