@@ -1,0 +1,87 @@
+//! One frontend of `benches/soak.py`: streams a seeded synthetic world to
+//! a running daemon and reports what the daemon acknowledged.
+//!
+//! ```text
+//! slamd-soak-frontend NAMESPACE WORLD SESSION KEYFRAMES RATE UNTIL_S
+//! ```
+//!
+//! The world is `slamd synth`'s with seed `1000 · WORLD + SESSION`; its
+//! keyframe ids start at `(1000 · WORLD + SESSION) · 2³²`, so sessions
+//! never share an id. World 0's session 0 holds keyframe 0, the daemon's
+//! gauge; every other session is tied to it by one exact odometry edge from
+//! keyframe 0 to its first keyframe, 300 m east per world and 300 m north
+//! per session, so all of them join one map. It publishes at most RATE
+//! keyframes a second, each with its edges, and once a second prints
+//! `acked N`: its first N keyframes are acknowledged (on disk, with a
+//! state directory). After the last one it waits for the acknowledgement,
+//! prints `done N`, and stays connected, polling, until UNTIL_S seconds
+//! after its start.
+
+use slamd::geometry::Pose2;
+use slamd::graph::{EdgeKind, Information};
+use slamd::synthetic::{generate, WorldParams};
+use slamd_protocol::{Endpoint, Frontend};
+use slamd::engine::EdgeInput;
+use std::time::{Duration, Instant};
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let [namespace, world, session, keyframes, rate, until] = args.as_slice() else {
+        return Err("usage: slamd-soak-frontend NAMESPACE WORLD SESSION KEYFRAMES RATE UNTIL_S".into());
+    };
+    let (world, session): (u64, u64) = (world.parse()?, session.parse()?);
+    let (keyframes, rate, until): (usize, f64, f64) = (keyframes.parse()?, rate.parse()?, until.parse()?);
+    let tag = 1000 * world + session;
+    let w = generate(&WorldParams {
+        poses: keyframes,
+        seed: tag,
+        ..WorldParams::default()
+    });
+    let base = tag << 32;
+    let mut frontend = Frontend::connect(Endpoint::new(namespace))?;
+    let edges = w.graph.edges();
+    let mut next_edge = 0;
+    let mut sequences = Vec::with_capacity(keyframes);
+    let start = Instant::now();
+    let mut report = Instant::now();
+    for k in 0..w.graph.len() {
+        sequences.push(frontend.add_keyframe(base + k as u64, 0, None)?);
+        if k == 0 && base != 0 {
+            let place = Pose2::new(300.0 * world as f64, 300.0 * session as f64, 0.0);
+            let tie = EdgeInput::new(0, base, place, Information::identity(), EdgeKind::Odometry);
+            frontend.add_edge(&tie)?;
+        }
+        // edges come in time order: those that end at keyframe k
+        while next_edge < edges.len() && edges[next_edge].from.max(edges[next_edge].to) <= k {
+            let e = &edges[next_edge];
+            let ids = (base + e.from as u64, base + e.to as u64);
+            frontend.add_edge(&EdgeInput::new(ids.0, ids.1, e.measurement, e.information, e.kind))?;
+            next_edge += 1;
+        }
+        frontend.flush()?;
+        let due = start + Duration::from_secs_f64((k + 1) as f64 / rate);
+        std::thread::sleep(due.saturating_duration_since(Instant::now()));
+        if report.elapsed() >= Duration::from_secs(1) {
+            print_acked("acked", &sequences, frontend.acknowledged());
+            report = Instant::now();
+        }
+    }
+    let last = frontend.last_sequence();
+    if !frontend.wait_acknowledged(last, Duration::from_secs(120))? {
+        return Err("the daemon did not acknowledge the last keyframe within 120 s".into());
+    }
+    print_acked("done", &sequences, frontend.acknowledged());
+    let until = start + Duration::from_secs_f64(until);
+    while Instant::now() < until {
+        frontend.poll()?;
+        std::thread::sleep(Duration::from_millis(500));
+    }
+    Ok(())
+}
+
+/// Prints how many of the first keyframes (by message number) the daemon
+/// acknowledged.
+fn print_acked(word: &str, sequences: &[u64], acked: u64) {
+    let n = sequences.partition_point(|&s| s <= acked);
+    println!("{word} {n}");
+}
