@@ -17,11 +17,11 @@
 //! prints `done N`, and stays connected, polling, until UNTIL_S seconds
 //! after its start.
 
+use slamd::engine::EdgeInput;
 use slamd::geometry::Pose2;
 use slamd::graph::{EdgeKind, Information};
 use slamd::synthetic::{generate, WorldParams};
 use slamd_protocol::{Endpoint, Frontend};
-use slamd::engine::EdgeInput;
 use std::time::{Duration, Instant};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -55,7 +55,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         while next_edge < edges.len() && edges[next_edge].from.max(edges[next_edge].to) <= k {
             let e = &edges[next_edge];
             let ids = (base + e.from as u64, base + e.to as u64);
-            frontend.add_edge(&EdgeInput::new(ids.0, ids.1, e.measurement, e.information, e.kind))?;
+            frontend.add_edge(&EdgeInput::new(
+                ids.0,
+                ids.1,
+                e.measurement,
+                e.information,
+                e.kind,
+            ))?;
             next_edge += 1;
         }
         frontend.flush()?;

@@ -145,7 +145,10 @@ mod tests {
         let (e, xi, xj) = drifted(101);
         assert_eq!(gate.rejected(8, false, &e, &xi, &xj), Verdict::Stays);
         let (e, xi, xj) = drifted(102);
-        assert_eq!(gate.rejected(9, true, &e, &xi, &xj), Verdict::EnterWith(vec![7, 9]));
+        assert_eq!(
+            gate.rejected(9, true, &e, &xi, &xj),
+            Verdict::EnterWith(vec![7, 9])
+        );
         // the run ended: a vouched loop closure that disagrees with the drift
         // (its keyframe 5 m off the drifted chain) waits alone
         let (e, xi, xj) = drifted(103);
