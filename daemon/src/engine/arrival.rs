@@ -100,16 +100,9 @@ impl ArrivalGate {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::graph::{EdgeKind, Information};
 
     fn closure(from: usize, to: usize, z: Pose2) -> Edge {
-        Edge {
-            from,
-            to,
-            measurement: z,
-            information: Information::identity(),
-            kind: EdgeKind::LoopClosure,
-        }
+        Edge::unit_loop_closure(from, to, z)
     }
 
     /// The true map: keyframe `k` at `(k, 0)`. The estimate of keyframe

@@ -21,6 +21,19 @@ pub struct Edge {
 }
 
 impl Edge {
+    /// A loop closure `z` from keyframe index `from` to `to` with unit
+    /// information (tests' shorthand).
+    #[cfg(test)]
+    pub(crate) fn unit_loop_closure(from: usize, to: usize, z: Pose2) -> Edge {
+        Edge {
+            from,
+            to,
+            measurement: z,
+            information: Information::identity(),
+            kind: EdgeKind::LoopClosure,
+        }
+    }
+
     /// The edge written the other way, `(j, i, T_ij⁻¹)`, information kept.
     pub fn reversed(&self) -> Edge {
         Edge {

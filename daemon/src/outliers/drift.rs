@@ -85,16 +85,9 @@ impl DriftRun {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::graph::{EdgeKind, Information};
 
     fn edge(from: usize, to: usize, z: Pose2) -> Edge {
-        Edge {
-            from,
-            to,
-            measurement: z,
-            information: Information::identity(),
-            kind: EdgeKind::LoopClosure,
-        }
+        Edge::unit_loop_closure(from, to, z)
     }
 
     #[test]
