@@ -127,6 +127,7 @@ pub fn serve_map(config: &Config, map: Option<MapFile>, stop: &AtomicBool) -> Re
         .recv()
         .map_err(|_| ServeError::EngineThread("stopped during start-up".into()))??;
 
+    let stop_engine = StopEngine(tx.clone());
     let tick = Duration::from_millis(config.ipc.tick_ms);
     let exit = ingress.run(tick, |wake| {
         let msg = match wake {
@@ -148,7 +149,7 @@ pub fn serve_map(config: &Config, map: Option<MapFile>, stop: &AtomicBool) -> Re
         };
         tx.send(msg).is_ok()
     });
-    let _ = tx.send(Msg::Shutdown);
+    drop(stop_engine);
     let counters = engine
         .join()
         .map_err(|_| ServeError::EngineThread("panicked".into()))?;
@@ -157,6 +158,17 @@ pub fn serve_map(config: &Config, map: Option<MapFile>, stop: &AtomicBool) -> Re
         Exit::Stopped => tracing::info!(?counters, "slamd stopped."),
     }
     Ok(counters)
+}
+
+/// Tells the engine thread to stop when dropped, also when the IPC loop
+/// unwinds: the engine's re-solve waker holds a sender of its channel, so
+/// the channel never closes by itself.
+struct StopEngine(channel::Sender<Msg>);
+
+impl Drop for StopEngine {
+    fn drop(&mut self) {
+        let _ = self.0.send(Msg::Shutdown);
+    }
 }
 
 /// Opens the state directory, if one is configured, and decides which map
