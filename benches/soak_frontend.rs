@@ -39,30 +39,21 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     });
     let base = tag << 32;
     let mut frontend = Frontend::connect(Endpoint::new(namespace))?;
-    let edges = w.graph.edges();
-    let mut next_edge = 0;
     let mut sequences = Vec::with_capacity(keyframes);
     let start = Instant::now();
     let mut report = Instant::now();
-    for k in 0..w.graph.len() {
+    for (k, group) in w.graph.by_newer().into_iter().enumerate() {
         sequences.push(frontend.add_keyframe(base + k as u64, 0, None)?);
         if k == 0 && base != 0 {
             let place = Pose2::new(300.0 * world as f64, 300.0 * session as f64, 0.0);
             let tie = EdgeInput::new(0, base, place, Information::identity(), EdgeKind::Odometry);
             frontend.add_edge(&tie)?;
         }
-        // edges come in time order: those that end at keyframe k
-        while next_edge < edges.len() && edges[next_edge].from.max(edges[next_edge].to) <= k {
-            let e = &edges[next_edge];
-            let ids = (base + e.from as u64, base + e.to as u64);
-            frontend.add_edge(&EdgeInput::new(
-                ids.0,
-                ids.1,
-                e.measurement,
-                e.information,
-                e.kind,
-            ))?;
-            next_edge += 1;
+        // the edges that keyframe k completes, in this session's ids
+        for e in group {
+            let mut edge = w.graph.edge_input(e);
+            (edge.from, edge.to) = (base + edge.from, base + edge.to);
+            frontend.add_edge(&edge)?;
         }
         frontend.flush()?;
         let due = start + Duration::from_secs_f64((k + 1) as f64 / rate);

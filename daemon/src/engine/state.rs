@@ -428,7 +428,9 @@ impl State {
     }
 
     /// Where the estimate is linearised: the Gauss–Newton system's point,
-    /// else (the linear source) the estimate itself.
+    /// else (the linear source) the estimate itself. Indexed like the
+    /// keyframes, but it may end at the newest joined one: a newer
+    /// keyframe no edge has connected yet has no linearisation point.
     pub fn linearisation(&self) -> &[Pose2] {
         self.solvers.linearisation().unwrap_or(&self.estimate)
     }
