@@ -5,7 +5,7 @@ use slamd::engine::{EdgeInput, Engine, EngineConfig};
 use slamd::eval::ate;
 use slamd::geometry::Pose2;
 use slamd::graph::{EdgeKind, Information, PoseGraph};
-use slamd::outliers::REJECTED_BELOW;
+use slamd::outliers::{OutlierConfig, REJECTED_BELOW};
 use slamd::solver::{solve_batch, BatchOptions};
 use slamd::synthetic::{generate, WorldParams};
 use slamd_tests::{dataset, max_pose_error, run_json};
@@ -294,6 +294,60 @@ fn a_trusted_loop_closure_is_never_switched_off() {
     let (switch, gap) = square_closed_wrongly(EdgeKind::TrustedLoopClosure);
     assert_eq!(switch, 1.0);
     assert!(gap > 5.0, "keyframe 40 is {gap} m from keyframe 0");
+}
+
+/// A corridor of 20 one-metre steps with loose odometry (unit
+/// information) and three loop closures from keyframe 3 to 15 measuring
+/// 12, 12.35 and 11.65 m (σ 0.1 m): the switches they end with after the
+/// closing re-solve, with PCM on or off. Pairwise, the first agrees with
+/// each of the others (d² = 0.35² / 0.02 = 6.1) and those two disagree
+/// (d² = 24.5 > 11.34). DCS, the third arriving against a map the other
+/// two already hold, switches it partly off, at the value its error
+/// gives; PCM holds it out of the clique, at switch 0.
+fn corridor_with_three_closures(pairwise: bool) -> [f64; 3] {
+    let mut engine = Engine::new(EngineConfig {
+        background: false,
+        outliers: OutlierConfig {
+            pairwise,
+            ..OutlierConfig::default()
+        },
+        ..EngineConfig::default()
+    });
+    for k in 0..20u64 {
+        engine.add_keyframe(k, None).unwrap();
+        if k > 0 {
+            let step = Pose2::new(1.0, 0.0, 0.0);
+            let e = EdgeInput::new(k - 1, k, step, Information::identity(), EdgeKind::Odometry);
+            engine.add_edge(e).unwrap();
+        }
+        engine.update();
+    }
+    let info = Information::identity().scaled(100.0);
+    let ids = [12.0, 12.35, 11.65].map(|x| {
+        let e = EdgeInput::new(3, 15, Pose2::new(x, 0.0, 0.0), info, EdgeKind::LoopClosure);
+        let e = engine.add_edge(e).unwrap();
+        engine.update();
+        e
+    });
+    engine.resolve_now();
+    let switches = engine.switches();
+    ids.map(|e| switches[e])
+}
+
+#[test]
+fn pairwise_consistency_holds_out_what_disagrees_with_the_clique() {
+    let [a, b, c] = corridor_with_three_closures(false);
+    assert!(
+        a >= REJECTED_BELOW && b >= REJECTED_BELOW,
+        "DCS keeps the first two: {a}, {b}"
+    );
+    assert!(c > 0.0 && c < REJECTED_BELOW, "DCS's switch of the third: {c}");
+    let [a, b, c] = corridor_with_three_closures(true);
+    assert!(
+        a >= REJECTED_BELOW && b >= REJECTED_BELOW,
+        "the clique stays: {a}, {b}"
+    );
+    assert_eq!(c, 0.0, "the third is held out");
 }
 
 /// A square loop of 200 one-metre steps whose odometry turns 0.005 rad too

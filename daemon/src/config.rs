@@ -47,6 +47,7 @@
 //! drift_run = 20               # agreeing rejections in a row that mean drift: re-solve
 //! arrival_covariance = true    # a loop closure the gate turns away is tried against the map's uncertainty
 //! unadmitted_start = false     # every re-solve (not only the closing one) also starts without the loop closures let in on arrival
+//! pairwise = false             # PCM: only the largest set of loop closures that agree pairwise through the odometry
 //! ```
 
 use crate::engine::EngineConfig;

@@ -5,7 +5,8 @@ use crate::gps::{variance_factor, Georef, GpsInput};
 use crate::graph::{chi2, Edge, EdgeKind, GraphError, PoseGraph};
 use crate::linear::{two_stage, virtual_frame, Pivot};
 use crate::nonlinear::{polish, LevenbergMarquardtParams, LmReport, Problem};
-use crate::outliers::{robust_polish, OutlierConfig};
+use crate::outliers::consistency::consistent_set;
+use crate::outliers::{robust_polish, OutlierConfig, RobustEdges};
 use crate::sparse::FactorError;
 use std::fmt;
 use std::str::FromStr;
@@ -185,7 +186,19 @@ pub fn solve_batch(graph: &PoseGraph, options: &BatchOptions) -> Result<BatchSol
         let mut starts = vec![poses.clone()];
         starts.extend(odometry_chain(graph));
         // a batch solve has the machine: the starts are probed two at a time
-        let sol = robust_polish(graph.edges(), &switchable, starts, filter, options.lm, 2, None)?;
+        let mut held_out = vec![false; switchable.len()];
+        if filter.enabled && filter.pairwise {
+            let candidates: Vec<usize> = (0..switchable.len()).filter(|&e| switchable[e]).collect();
+            let kept = consistent_set(graph.len(), graph.edges(), &candidates, filter.pairwise_chi2);
+            candidates.iter().for_each(|&e| held_out[e] = true);
+            kept.iter().for_each(|&e| held_out[e] = false);
+        }
+        let input = RobustEdges {
+            edges: graph.edges(),
+            switchable: &switchable,
+            held_out: &held_out,
+        };
+        let sol = robust_polish(input, starts, filter, options.lm, 2, None)?;
         let mut poses = sol.poses;
         if let Some(gps) = gps.filter(|g| g.absolute) {
             let edges: Vec<Edge> = (graph.edges().iter().zip(&sol.switches))

@@ -10,9 +10,11 @@ use crate::gps::{variance_factor, Georef, GpsConfig, GpsFix, GpsInput};
 use crate::graph::{chi2_of_edges, Edge, PoseGraph};
 use crate::linear::two_stage;
 use crate::nonlinear::{LevenbergMarquardtParams, PositionPrior};
-use crate::outliers::{robust_polish, OFF_BELOW, REJECTED_BELOW};
+use crate::outliers::consistency::ConsistencyGraph;
+use crate::outliers::{robust_polish, OutlierConfig, RobustEdges, OFF_BELOW, REJECTED_BELOW};
 use std::collections::HashMap;
 use std::sync::atomic::AtomicBool;
+use std::sync::{Arc, Mutex};
 
 /// What the engine holds of one edge besides its measurement.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -74,6 +76,10 @@ pub struct Model {
     pub georef: Option<Georef>,
     /// The weight of every GPS prior (the graph's variance factor).
     pub gps_weight: f64,
+    /// The pairwise consistency of the loop closures. It depends on the
+    /// input alone, so every copy of the model (a background re-solve's)
+    /// shares and extends the one graph.
+    pub consistency: Arc<Mutex<ConsistencyGraph>>,
 }
 
 impl Model {
@@ -158,6 +164,7 @@ impl Model {
             .iter()
             .map(|&e| filter.switchable(&self.graph.edges()[e]))
             .collect();
+        let held_out = self.held_out(filter, &ids, &switchable);
         let initial: Vec<Pose2> = joined.iter().map(|&k| lin[k]).collect();
         let starts = self.starts(config, compact, joined, &initial, &ids, polish);
         let threads = if matches!(polish, Polish::FullInline | Polish::Closing) {
@@ -165,15 +172,12 @@ impl Model {
         } else {
             1
         };
-        let Ok(solution) = robust_polish(
-            &edges,
-            &switchable,
-            starts,
-            filter,
-            config.polish,
-            threads,
-            Some(stop),
-        ) else {
+        let input = RobustEdges {
+            edges: &edges,
+            switchable: &switchable,
+            held_out: &held_out,
+        };
+        let Ok(solution) = robust_polish(input, starts, filter, config.polish, threads, Some(stop)) else {
             return initial;
         };
         for (a, &e) in ids.iter().enumerate() {
@@ -183,6 +187,34 @@ impl Model {
             self.edges.iter_mut().for_each(|s| s.admitted = false);
         }
         solution.poses
+    }
+
+    /// Which of the edges `ids` (graph indices; `switchable` alike) PCM
+    /// holds out: the switchable ones outside the largest consistent set
+    /// among them ([`ConsistencyGraph`]), when the filter asks for it.
+    fn held_out(&self, filter: &OutlierConfig, ids: &[usize], switchable: &[bool]) -> Vec<bool> {
+        if !(filter.enabled && filter.pairwise) {
+            return vec![false; ids.len()];
+        }
+        let edges = self.graph.edges();
+        let mut graph = self.consistency.lock().unwrap_or_else(|e| e.into_inner());
+        graph.update(
+            self.graph.len(),
+            edges,
+            |e| filter.switchable(&edges[e]),
+            filter.pairwise_chi2,
+        );
+        let candidates: Vec<usize> = ids
+            .iter()
+            .zip(switchable)
+            .filter(|(_, &s)| s)
+            .map(|(&e, _)| e)
+            .collect();
+        let kept = graph.clique(&candidates);
+        ids.iter()
+            .zip(switchable)
+            .map(|(e, &s)| s && kept.binary_search(e).is_err())
+            .collect()
     }
 
     /// The starts of [`Self::robust_polish`] (`ids`: the graph indices of

@@ -21,6 +21,18 @@ pub struct RobustSolution {
     pub cost: f64,
 }
 
+/// The edges of a [`robust_polish`] and what it may do with each.
+#[derive(Clone, Copy, Debug)]
+pub struct RobustEdges<'a> {
+    /// The edges.
+    pub edges: &'a [Edge],
+    /// Whether each edge gets a switch.
+    pub switchable: &'a [bool],
+    /// Edges held out before the polish, at switch 0 (PCM's verdict); a
+    /// shorter slice holds out none past its end.
+    pub held_out: &'a [bool],
+}
+
 /// Iterations each start of [`robust_polish`] gets before the pruning.
 pub const PROBE_ITERATIONS: usize = 12;
 
@@ -239,8 +251,9 @@ impl Drop for Unblock<'_> {
     }
 }
 
-/// Paper A's cycle test (when configured) switches off what it rejects;
-/// Levenberg–Marquardt then minimises the kernel's robust cost, each
+/// The edges `input` holds out (PCM's verdict, [`super::consistency`])
+/// and those paper A's cycle test (when configured) rejects are switched
+/// off; Levenberg–Marquardt then minimises the kernel's robust cost, each
 /// switchable edge reweighted by `s²` at every iteration (edges dormant at a
 /// start sit out until they wake: [`DORMANT_BELOW`]), from every start
 /// for [`PROBE_ITERATIONS`] (a start far above the ones before it, for
@@ -250,14 +263,18 @@ impl Drop for Unblock<'_> {
 /// the same outcome. Once `stop` is set, every polish ends where it is.
 /// Fails when no start could be polished (or none was given).
 pub fn robust_polish(
-    edges: &[Edge],
-    switchable: &[bool],
+    input: RobustEdges<'_>,
     starts: Vec<Vec<Pose2>>,
     config: &OutlierConfig,
     params: LevenbergMarquardtParams,
     threads: usize,
     stop: Option<&AtomicBool>,
 ) -> Result<RobustSolution, FactorError> {
+    let RobustEdges {
+        edges,
+        switchable,
+        held_out,
+    } = input;
     let n = starts.first().map_or(0, Vec::len);
     let mut out = vec![false; edges.len()];
     if config.enabled && config.cycles {
@@ -266,6 +283,9 @@ pub fn robust_polish(
         for (a, o) in out.iter_mut().enumerate() {
             *o = switchable[a] && check.verdict(a, &config.cycle) == Verdict::Reject;
         }
+    }
+    for (o, &h) in out.iter_mut().zip(held_out) {
+        *o |= h;
     }
     let kept: Vec<usize> = (0..edges.len()).filter(|&a| !out[a]).collect();
     let kept_edges: Vec<Edge> = kept.iter().map(|&a| edges[a]).collect();
@@ -401,7 +421,19 @@ mod tests {
         );
         assert!(config.kernel.switch(closure, &start[7], &start[0]) < DORMANT_BELOW);
         let params = LevenbergMarquardtParams::default();
-        let got = robust_polish(&edges, &switchable, vec![start.clone()], &config, params, 1, None).unwrap();
+        let got = robust_polish(
+            RobustEdges {
+                edges: &edges,
+                switchable: &switchable,
+                held_out: &[],
+            },
+            vec![start.clone()],
+            &config,
+            params,
+            1,
+            None,
+        )
+        .unwrap();
         // the reference: every edge in every linear system
         let problem = Problem {
             edges: &edges,
@@ -490,7 +522,19 @@ mod tests {
         let stop = AtomicBool::new(true);
         let polish = || {
             let starts = vec![start.clone()];
-            robust_polish(&edges, &switchable, starts, &config, params, 1, Some(&stop)).unwrap()
+            robust_polish(
+                RobustEdges {
+                    edges: &edges,
+                    switchable: &switchable,
+                    held_out: &[],
+                },
+                starts,
+                &config,
+                params,
+                1,
+                Some(&stop),
+            )
+            .unwrap()
         };
         let stopped = polish();
         assert_eq!(stopped.poses, start);
