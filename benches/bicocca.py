@@ -11,7 +11,7 @@ them false), runs in one process run:
 - `slamd replay FILE --embedded --skip-invalid` (the filter on, as
   shipped): how many loop closures it keeps;
 - GTSAM's GncOptimizer (Levenberg-Marquardt inside, odometry known
-  inliers, from the odometry guess), as `benches/outliers.py --gnc` runs it.
+  inliers, from the odometry guess), as `benches/outliers.py --peers` runs it.
 
 Each map is scored against the GPS ground truth, interpolated at each
 pose's time from the timestamps file (poses outside its span left out),

@@ -4,7 +4,7 @@
     cargo build --release --bin slamd
     python3 benches/outliers.py [--datasets manhattan city intel ringcity]
                                 [--kinds random local random-grouped local-grouped]
-                                [--counts 100 1000 4000] [--gnc --gnc-timeout 600]
+                                [--counts 100 1000 4000] [--peers --peer-timeout 600]
 
 Paper B's protocol, extended (docs/design.md, "Robust kernels and
 switches"). ../shared/tools/add_outliers.py injects Vertigo-style loop
@@ -19,10 +19,12 @@ its defaults. Per run:
   relative to the outlier-free optimum;
 - total replay time and p99 latency per keyframe.
 
-With --gnc, GTSAM's GncOptimizer (batch, Levenberg–Marquardt inside,
-truncated least squares, odometry known inliers) runs on the same spoiled
-files from the odometry guess, under --gnc-timeout seconds each, and is
-scored the same way. Its inlier set gives its precision / recall.
+With --peers, GTSAM runs on the same spoiled files from the odometry
+guess, each under --peer-timeout seconds, and is scored the same way:
+GncOptimizer (Levenberg–Marquardt inside, truncated least squares,
+odometry known inliers; a weight below 0.5 is a rejection) and
+Levenberg–Marquardt with DCS at slamd's Φ on every loop closure (a switch
+below 0.5 at its optimum is a rejection).
 """
 import argparse, json, math, os, subprocess, sys, tempfile, time
 
@@ -48,19 +50,20 @@ def score(binary, clean, poses, gt):
     return slamd(binary, *args)
 
 
-def gnc(spoiled, timeout):
-    """GTSAM GNC on `spoiled` in a child process; (seconds, poses file, inlier edge indices) or None."""
-    out = tempfile.mktemp(suffix=".txt")
-    code = f"""
+PEER = """
 import json, math, sys, time, gtsam, numpy as np
-sys.path.insert(0, {HERE!r})
+sys.path.insert(0, {here!r})
 from peer_gtsam import read_g2o
 vertices, edges = read_g2o({spoiled!r})
+dcs = gtsam.noiseModel.mEstimator.DCS.Create({phi!r})
 graph = gtsam.NonlinearFactorGraph()
 known = []
 for n, (i, j, x, y, th, I) in enumerate(edges):
     omega = np.array([[I[0], I[1], I[2]], [I[1], I[3], I[4]], [I[2], I[4], I[5]]])
-    graph.add(gtsam.BetweenFactorPose2(i, j, gtsam.Pose2(x, y, th), gtsam.noiseModel.Gaussian.Information(omega)))
+    noise = gtsam.noiseModel.Gaussian.Information(omega)
+    if {method!r} == "dcs" and j != i + 1:
+        noise = gtsam.noiseModel.Robust.Create(dcs, noise)
+    graph.add(gtsam.BetweenFactorPose2(i, j, gtsam.Pose2(x, y, th), noise))
     if j == i + 1:
         known.append(n)
 first = min(vertices)
@@ -74,17 +77,41 @@ for i, j, x, y, th, I in sorted(e for e in edges if e[1] == e[0] + 1):
 initial = gtsam.Values()
 for k in vertices:
     initial.insert(k, guess.get(k, gtsam.Pose2(*vertices[k])))
-params = gtsam.GncLMParams()
-params.setKnownInliers(known)
 t = time.perf_counter()
-result = gtsam.GncLMOptimizer(graph, initial, params).optimize()
+if {method!r} == "gnc":
+    params = gtsam.GncLMParams()
+    params.setKnownInliers(known)
+    optimizer = gtsam.GncLMOptimizer(graph, initial, params)
+    result = optimizer.optimize()
+    weights = optimizer.getWeights()
+    rejected = [n for n in range(len(edges)) if weights[n] < 0.5]
+else:
+    result = gtsam.LevenbergMarquardtOptimizer(graph, initial, gtsam.LevenbergMarquardtParams()).optimize()
+    rejected = []
+    for n, (i, j, x, y, th, I) in enumerate(edges):
+        if j != i + 1:
+            f = gtsam.BetweenFactorPose2(i, j, gtsam.Pose2(x, y, th), gtsam.noiseModel.Gaussian.Information(
+                np.array([[I[0], I[1], I[2]], [I[1], I[3], I[4]], [I[2], I[4], I[5]]])))
+            if dcs.weight(math.sqrt(2 * f.error(result))) < 0.25:
+                rejected.append(n)
 secs = time.perf_counter() - t
 with open({out!r}, "w") as f:
     for k in sorted(vertices):
         p = result.atPose2(k)
         f.write(f"{{k}} {{p.x()}} {{p.y()}} {{p.theta()}}\\n")
-print(json.dumps({{"seconds": secs}}))
+print(json.dumps({{"seconds": secs, "rejected": rejected}}))
 """
+
+
+def peer(spoiled, method, timeout, phi=16.27 / 3):
+    """GTSAM on `spoiled` in a child process: `gnc` (GncLMOptimizer, truncated
+    least squares, odometry known inliers) or `dcs` (Levenberg–Marquardt with
+    DCS at Φ on every loop closure), from the odometry guess. Returns
+    (seconds, poses file, rejected edge indices) or None on failure or
+    timeout. A loop closure counts as rejected at a GNC weight below 0.5 or
+    a DCS weight s² below 0.25 (s < 0.5, as slamd counts)."""
+    out = tempfile.mktemp(suffix=".txt")
+    code = PEER.format(here=HERE, spoiled=spoiled, phi=phi, method=method, out=out)
     try:
         r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=timeout)
     except subprocess.TimeoutExpired:
@@ -92,7 +119,14 @@ print(json.dumps({{"seconds": secs}}))
     if r.returncode != 0:
         print(r.stderr[-500:], file=sys.stderr)
         return None
-    return json.loads(r.stdout)["seconds"], out
+    res = json.loads(r.stdout)
+    return res["seconds"], out, set(res["rejected"])
+
+
+def gnc(spoiled, timeout):
+    """GTSAM's GNC on `spoiled` (see [`peer`]): (seconds, poses file) or None."""
+    g = peer(spoiled, "gnc", timeout)
+    return g and g[:2]
 
 
 def main():
@@ -103,14 +137,14 @@ def main():
     ap.add_argument("--counts", nargs="+", type=int, default=[100, 1000, 4000])
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--extra", nargs="*", default=[], help="more slamd replay flags, e.g. --kernel sc:1")
-    ap.add_argument("--gnc", action="store_true")
-    ap.add_argument("--gnc-timeout", type=float, default=600)
+    ap.add_argument("--peers", action="store_true", help="GTSAM's GNC and DCS in its LM on the same files")
+    ap.add_argument("--peer-timeout", type=float, default=600)
     args = ap.parse_args()
     tmp = tempfile.mkdtemp(prefix="slamd-outliers-")
     print(f"slamd replay --embedded {' '.join(args.extra)} (filter defaults); seed {args.seed}")
     print("| dataset | outliers | precision | recall | ATE (m) | ATE clean (m) | χ² true / optimum | total (s) | p99 (ms) |"
-          + (" GNC P / R | GNC ATE (m) | GNC (s) |" if args.gnc else ""))
-    print("|---|---|---|---|---|---|---|---|---|" + ("---|---|---|" if args.gnc else ""))
+          + (" GNC P / R | GNC ATE (m) | GNC χ² true / optimum | GNC (s) | LM+DCS P / R | LM+DCS ATE (m) | LM+DCS χ² true / optimum | LM+DCS (s) |" if args.peers else ""))
+    print("|---|---|---|---|---|---|---|---|---|" + ("---|" * 8 if args.peers else ""))
     for name in args.datasets:
         file, gt = DATASETS[name]
         clean = os.path.join(DATA, file)
@@ -135,15 +169,17 @@ def main():
                 ate0 = f"{base['ate']:.4f}" if base.get("ate") is not None else "–"
                 row = (f"| {name} | {count} {kind} | {precision:.3f} | {recall:.3f} | {ate} | {ate0} | "
                        f"{s['chi2'] / optimum:.3f} | {r['total_s']:.2f} | {r['p99_us'] / 1e3:.1f} |")
-                if args.gnc:
-                    g = gnc(spoiled, args.gnc_timeout)
+                for method in ("gnc", "dcs") if args.peers else ():
+                    g = peer(spoiled, method, args.peer_timeout)
                     if g is None:
-                        row += f" timeout ({args.gnc_timeout:.0f} s) | – | – |"
-                    else:
-                        secs, gposes = g
-                        gs = score(args.slamd, spoiled, gposes, gt)
-                        gate = f"{gs['ate']:.4f}" if gs.get("ate") is not None else "–"
-                        row += f" – | {gate} | {secs:.1f} |"
+                        row += f" failed or timed out ({args.peer_timeout:.0f} s) | – | – | – |"
+                        continue
+                    secs, gposes, rejected = g
+                    gs = score(args.slamd, clean, gposes, gt)
+                    gate = f"{gs['ate']:.4f}" if gs.get("ate") is not None else "–"
+                    caught = injected & rejected
+                    row += (f" {len(caught) / max(1, len(rejected)):.3f} / {len(caught) / len(injected):.3f} | "
+                            f"{gate} | {gs['chi2'] / optimum:.3f} | {secs:.1f} |")
                 print(row, flush=True)
 
 
