@@ -308,7 +308,7 @@ impl ConsistencyGraph {
             .copied()
             .filter(|&u| self.consistent(v, u))
             .collect();
-        let mut bits: Vec<u64> = mask
+        let bits: Vec<u64> = mask
             .iter()
             .enumerate()
             .map(|(w, m)| m & self.rows[v].get(w).copied().unwrap_or(0))
@@ -335,7 +335,6 @@ impl ConsistencyGraph {
                 .iter()
                 .partition(|&&w| w == pick || !self.consistent(pick, w));
             for &w in &dropped {
-                bits[w / 64] &= !(1 << (w % 64));
                 for &x in &kept {
                     inner[x] -= u32::from(self.consistent(w, x));
                 }
