@@ -202,9 +202,9 @@ pub struct ConsistencyGraph {
 
 impl ConsistencyGraph {
     /// Takes in the edges of `edges` (over `n` keyframes) past the ones
-    /// taken in already: odometry extends the chains, and each edge whose index
-    /// `candidate` accepts
-    /// becomes a vertex, tested against every earlier one at bound `chi2`.
+    /// taken in already: odometry extends the chains, and each edge whose
+    /// index `candidate` accepts becomes a vertex, tested against every
+    /// earlier one at bound `chi2`.
     pub fn update(&mut self, n: usize, edges: &[Edge], candidate: impl Fn(usize) -> bool, chi2: f64) {
         let common = self.ends.len().min(edges.len());
         let agrees = common == 0 || self.ends[common - 1] == (edges[common - 1].from, edges[common - 1].to);
