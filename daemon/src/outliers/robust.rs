@@ -15,7 +15,7 @@ pub struct RobustSolution {
     /// The poses.
     pub poses: Vec<Pose2>,
     /// The switch `s ∈ [0, 1]` of each edge (1 where not switchable, 0 where
-    /// the cycle test rejected it).
+    /// the cycle test rejected it or PCM held it out).
     pub switches: Vec<f64>,
     /// The robust cost at `poses`.
     pub cost: f64,
