@@ -9,7 +9,7 @@ processes (benches/soak_frontend.rs), each streaming its own seeded
 synthetic world at --rate keyframes a second for the first
 --publish-minutes, then staying connected, polling, to the end. --kills
 times, at random moments (--seed), one frontend is SIGKILLed and a new one
-starts in its place with a fresh world (its next session) for what is
+starts in its place with a fresh world (the next restart number) for what is
 left of the publishing window (two keyframes once it is over). Every 10 s
 it samples the daemon's RSS and `slamd status --json`.
 
@@ -32,13 +32,13 @@ BIN = os.environ.get("SLAMD_BIN") or os.path.join(RELEASE, "slamd")
 FRONTEND = os.path.join(os.path.dirname(BIN), "slamd-soak-frontend")
 
 
-class Session:
-    """One frontend process: its world, session and last report."""
+class Frontend:
+    """One frontend process: its world, restart number and last report."""
 
-    def __init__(self, ns, world, session, keyframes, rate, until):
-        self.world, self.session, self.keyframes = world, session, keyframes
+    def __init__(self, ns, world, restart, keyframes, rate, until):
+        self.world, self.restart, self.keyframes = world, restart, keyframes
         self.acked, self.done = 0, False
-        self.proc = subprocess.Popen([FRONTEND, ns, str(world), str(session), str(keyframes),
+        self.proc = subprocess.Popen([FRONTEND, ns, str(world), str(restart), str(keyframes),
                                       str(rate), str(until)],
                                      stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         threading.Thread(target=self._read, daemon=True).start()
@@ -52,7 +52,7 @@ class Session:
 
     def ids(self):
         """The ids of the keyframes the daemon acknowledged to it."""
-        base = (1000 * self.world + self.session) << 32
+        base = (1000 * self.world + self.restart) << 32
         return range(base, base + self.acked)
 
 
@@ -105,15 +105,15 @@ def main():
     time.sleep(1.0)
     t0 = time.time()
 
-    def start(world, session):
+    def start(world, restart):
         left = publish - (time.time() - t0)
         keyframes = max(2, int(a.rate * left))
-        return Session(ns, world, session, keyframes, a.rate, max(0.0, total - (time.time() - t0)))
+        return Frontend(ns, world, restart, keyframes, a.rate, max(0.0, total - (time.time() - t0)))
 
-    sessions = [start(0, 0)]
+    processes = [start(0, 0)]
     time.sleep(0.5)
-    sessions += [start(w, 0) for w in range(1, a.frontends)]
-    current = list(range(a.frontends))  # index into sessions, per world
+    processes += [start(w, 0) for w in range(1, a.frontends)]
+    current = list(range(a.frontends))  # index into processes, per world
     kills = sorted(rng.uniform(10, total - 30) for _ in range(a.kills))
     samples, next_sample = [], 0.0
     while time.time() - t0 < total:
@@ -126,13 +126,13 @@ def main():
         if kills and now >= kills[0]:
             kills.pop(0)
             w = rng.randrange(a.frontends)
-            old = sessions[current[w]]
+            old = processes[current[w]]
             old.proc.send_signal(signal.SIGKILL)
             old.proc.wait()
-            sessions.append(start(w, old.session + 1))
-            current[w] = len(sessions) - 1
+            processes.append(start(w, old.restart + 1))
+            current[w] = len(processes) - 1
         time.sleep(0.2)
-    for s in sessions:
+    for s in processes:
         if s.proc.poll() is None:
             try:
                 s.proc.wait(timeout=150)
@@ -150,9 +150,9 @@ def main():
     daemon.wait()
     log.close()
     ids, edges = map_ids(os.path.join(state, "dir", "map"))
-    acked = sum(s.acked for s in sessions)
-    lost = sum(1 for s in sessions for i in s.ids() if i not in ids)
-    failed = [s for s in sessions if s.proc.returncode not in (0, -signal.SIGKILL)]
+    acked = sum(s.acked for s in processes)
+    lost = sum(1 for s in processes for i in s.ids() if i not in ids)
+    failed = [s for s in processes if s.proc.returncode not in (0, -signal.SIGKILL)]
     print(f"state directory and daemon log: {state}")
     print(f"`python3 benches/soak.py --minutes {a.minutes:g} --frontends {a.frontends} --rate {a.rate:g} "
           f"--publish-minutes {a.publish_minutes:g} --kills {a.kills} --seed {a.seed}`")
@@ -164,13 +164,13 @@ def main():
     last = [r for t, r, *_ in samples if t >= total - 300]
     growth = (last[-1] / last[0] - 1) * 100 if len(last) > 1 else float("nan")
     print()
-    print("| daemon | frontend sessions | killed | failed | keyframes acknowledged | in the final map "
+    print("| daemon | frontend processes | killed | failed | keyframes acknowledged | in the final map "
           "| acknowledged lost | edges in the map | rejected | RSS growth, last 5 min |")
     print("|---|---|---|---|---|---|---|---|---|---|")
-    print(f"| {'crashed' if crashed else 'ran through'} | {len(sessions)} | {a.kills} | {len(failed)} | {acked} "
+    print(f"| {'crashed' if crashed else 'ran through'} | {len(processes)} | {a.kills} | {len(failed)} | {acked} "
           f"| {len(ids)} | {lost} | {edges} | {final.get('rejected')} | {growth:+.1f}% |")
     for s in failed:
-        print(f"frontend {s.world}/{s.session} exited {s.proc.returncode}: {s.proc.stderr.read().strip()}")
+        print(f"frontend {s.world}/{s.restart} exited {s.proc.returncode}: {s.proc.stderr.read().strip()}")
     ok = not crashed and lost == 0 and not failed and final.get("rejected") == 0 and growth <= 5
     return 0 if ok else 1
 

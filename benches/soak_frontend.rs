@@ -2,15 +2,17 @@
 //! a running daemon and reports what the daemon acknowledged.
 //!
 //! ```text
-//! slamd-soak-frontend NAMESPACE WORLD SESSION KEYFRAMES RATE UNTIL_S
+//! slamd-soak-frontend NAMESPACE WORLD RESTART KEYFRAMES RATE UNTIL_S
 //! ```
 //!
-//! The world is `slamd synth`'s with seed `1000 · WORLD + SESSION`; its
-//! keyframe ids start at `(1000 · WORLD + SESSION) · 2³²`, so sessions
-//! never share an id. World 0's session 0 holds keyframe 0, the daemon's
-//! gauge; every other session is tied to it by one exact odometry edge from
-//! keyframe 0 to its first keyframe, 300 m east per world and 300 m north
-//! per session, so all of them join one map. It publishes at most RATE
+//! RESTART counts the frontends that streamed WORLD before this one (0
+//! for the first; one more after each kill). The world is `slamd synth`'s
+//! with seed `1000 · WORLD + RESTART`; its keyframe ids start at
+//! `(1000 · WORLD + RESTART) · 2³²`, so no two frontends share an id.
+//! World 0's first frontend holds keyframe 0, the daemon's gauge; every
+//! other frontend is tied to it by one exact odometry edge from keyframe 0
+//! to its first keyframe, 300 m east per world and 300 m north per
+//! restart, so all of them join one map. It publishes at most RATE
 //! keyframes a second, each with its edges, and once a second prints
 //! `acked N`: its first N keyframes are acknowledged (on disk, with a
 //! state directory). After the last one it waits for the acknowledgement,
@@ -26,12 +28,12 @@ use std::time::{Duration, Instant};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let [namespace, world, session, keyframes, rate, until] = args.as_slice() else {
-        return Err("usage: slamd-soak-frontend NAMESPACE WORLD SESSION KEYFRAMES RATE UNTIL_S".into());
+    let [namespace, world, restart, keyframes, rate, until] = args.as_slice() else {
+        return Err("usage: slamd-soak-frontend NAMESPACE WORLD RESTART KEYFRAMES RATE UNTIL_S".into());
     };
-    let (world, session): (u64, u64) = (world.parse()?, session.parse()?);
+    let (world, restart): (u64, u64) = (world.parse()?, restart.parse()?);
     let (keyframes, rate, until): (usize, f64, f64) = (keyframes.parse()?, rate.parse()?, until.parse()?);
-    let tag = 1000 * world + session;
+    let tag = 1000 * world + restart;
     let w = generate(&WorldParams {
         poses: keyframes,
         seed: tag,
@@ -45,11 +47,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     for (k, group) in w.graph.by_newer().into_iter().enumerate() {
         sequences.push(frontend.add_keyframe(base + k as u64, 0, None)?);
         if k == 0 && base != 0 {
-            let place = Pose2::new(300.0 * world as f64, 300.0 * session as f64, 0.0);
+            let place = Pose2::new(300.0 * world as f64, 300.0 * restart as f64, 0.0);
             let tie = EdgeInput::new(0, base, place, Information::identity(), EdgeKind::Odometry);
             frontend.add_edge(&tie)?;
         }
-        // the edges that keyframe k completes, in this session's ids
+        // the edges that keyframe k completes, in this frontend's ids
         for e in group {
             let mut edge = w.graph.edge_input(e);
             (edge.from, edge.to) = (base + edge.from, base + edge.to);
