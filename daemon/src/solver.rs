@@ -5,7 +5,7 @@ use crate::gps::{variance_factor, Georef, GpsInput};
 use crate::graph::{chi2, Edge, EdgeKind, GraphError, PoseGraph};
 use crate::linear::{two_stage, virtual_frame, Pivot};
 use crate::nonlinear::{polish, LevenbergMarquardtParams, LmReport, Problem};
-use crate::outliers::consistency::consistent_set;
+use crate::outliers::consistency::ConsistencyGraph;
 use crate::outliers::{robust_polish, OutlierConfig, RobustEdges};
 use crate::sparse::FactorError;
 use std::fmt;
@@ -186,13 +186,19 @@ pub fn solve_batch(graph: &PoseGraph, options: &BatchOptions) -> Result<BatchSol
         let mut starts = vec![poses.clone()];
         starts.extend(odometry_chain(graph));
         // a batch solve has the machine: the starts are probed two at a time
-        let mut held_out = vec![false; switchable.len()];
-        if filter.enabled && filter.pairwise {
-            let candidates: Vec<usize> = (0..switchable.len()).filter(|&e| switchable[e]).collect();
-            let kept = consistent_set(graph.len(), graph.edges(), &candidates, filter.pairwise_chi2);
-            candidates.iter().for_each(|&e| held_out[e] = true);
-            kept.iter().for_each(|&e| held_out[e] = false);
-        }
+        let held_out = if filter.enabled && filter.pairwise {
+            let mut pcm = ConsistencyGraph::default();
+            pcm.update(
+                graph.len(),
+                graph.edges(),
+                |e| switchable[e],
+                filter.pairwise_chi2,
+            );
+            let ids: Vec<usize> = (0..switchable.len()).collect();
+            pcm.held_out(&ids, &switchable)
+        } else {
+            Vec::new()
+        };
         let input = RobustEdges {
             edges: graph.edges(),
             switchable: &switchable,

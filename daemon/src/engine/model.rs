@@ -191,10 +191,11 @@ impl Model {
 
     /// Which of the edges `ids` (graph indices; `switchable` alike) PCM
     /// holds out: the switchable ones outside the largest consistent set
-    /// among them ([`ConsistencyGraph`]), when the filter asks for it.
+    /// among them ([`ConsistencyGraph`]), when the filter asks for it
+    /// (else none: an empty list).
     fn held_out(&self, filter: &OutlierConfig, ids: &[usize], switchable: &[bool]) -> Vec<bool> {
         if !(filter.enabled && filter.pairwise) {
-            return vec![false; ids.len()];
+            return Vec::new();
         }
         let edges = self.graph.edges();
         let mut graph = self.consistency.lock().unwrap_or_else(|e| e.into_inner());
@@ -204,17 +205,7 @@ impl Model {
             |e| filter.switchable(&edges[e]),
             filter.pairwise_chi2,
         );
-        let candidates: Vec<usize> = ids
-            .iter()
-            .zip(switchable)
-            .filter(|(_, &s)| s)
-            .map(|(&e, _)| e)
-            .collect();
-        let kept = graph.clique(&candidates);
-        ids.iter()
-            .zip(switchable)
-            .map(|(e, &s)| s && kept.binary_search(e).is_err())
-            .collect()
+        graph.held_out(ids, switchable)
     }
 
     /// The starts of [`Self::robust_polish`] (`ids`: the graph indices of

@@ -297,6 +297,23 @@ impl ConsistencyGraph {
         kept
     }
 
+    /// Which of the edges `ids` (ascending edge indices; `switchable`
+    /// alike) PCM holds out: the switchable ones outside the clique among
+    /// the switchable ones.
+    pub fn held_out(&self, ids: &[usize], switchable: &[bool]) -> Vec<bool> {
+        let candidates: Vec<usize> = ids
+            .iter()
+            .zip(switchable)
+            .filter(|(_, &s)| s)
+            .map(|(&e, _)| e)
+            .collect();
+        let kept = self.clique(&candidates);
+        ids.iter()
+            .zip(switchable)
+            .map(|(e, &s)| s && kept.binary_search(e).is_err())
+            .collect()
+    }
+
     /// A clique through `v` within `mask` (`present`: its vertices), grown
     /// from its neighbours: each step takes the candidate with the most
     /// neighbours among the candidates (the lowest vertex on ties) and
@@ -345,16 +362,6 @@ impl ConsistencyGraph {
     }
 }
 
-/// The loop closures of a whole graph that PCM keeps: `candidates` (edge
-/// indices, ascending) over `n` keyframes, tested at bound `chi2`.
-pub fn consistent_set(n: usize, edges: &[Edge], candidates: &[usize], chi2: f64) -> Vec<usize> {
-    let mut inside = vec![false; edges.len()];
-    candidates.iter().for_each(|&e| inside[e] = true);
-    let mut graph = ConsistencyGraph::default();
-    graph.update(n, edges, |e| inside[e], chi2);
-    graph.clique(candidates)
-}
-
 /// `eᵀ Σ⁻¹ e` of a cycle, `e = (x, y, θ)` with θ wrapped.
 fn mahalanobis(cycle: &Uncertain) -> f64 {
     let e = Vector3::new(cycle.pose.x, cycle.pose.y, cycle.pose.s.atan2(cycle.pose.c));
@@ -382,6 +389,23 @@ mod tests {
             information: Information::from_upper([w, 0.0, 0.0, w, 0.0, w]).unwrap(),
             kind,
         }
+    }
+
+    /// A loop closure with information 10⁴.
+    fn closure(from: usize, to: usize, z: Pose2) -> Edge {
+        edge(from, to, z, 1e4, EdgeKind::LoopClosure)
+    }
+
+    /// What PCM keeps of `candidates` (ascending) in a whole graph.
+    fn consistent_set(edges: &[Edge], candidates: &[usize]) -> Vec<usize> {
+        let mut graph = ConsistencyGraph::default();
+        graph.update(
+            80,
+            edges,
+            |e| candidates.binary_search(&e).is_ok(),
+            CONSISTENT_CHI2,
+        );
+        graph.clique(candidates)
     }
 
     /// Two laps of a circle of radius 10 m, 40 keyframes a lap, with exact
@@ -429,25 +453,19 @@ mod tests {
         let first = edges.len();
         // 40 true loop closures k → k + 40 (the same place) ...
         for k in 0..40 {
-            edges.push(edge(
-                k,
-                k + 40,
-                truth[k].between(&truth[k + 40]),
-                1e4,
-                EdgeKind::LoopClosure,
-            ));
+            edges.push(closure(k, k + 40, truth[k].between(&truth[k + 40])));
         }
         // ... a group of 10 wrong ones claiming k and k + 45 coincide (they
         // agree with each other: the circle is symmetric) ...
         for k in 0..10 {
-            edges.push(edge(k, k + 45, Pose2::IDENTITY, 1e4, EdgeKind::LoopClosure));
+            edges.push(closure(k, k + 45, Pose2::IDENTITY));
         }
         // ... and 5 lone wrong ones
         for (i, j) in [(2, 33), (7, 61), (12, 70), (20, 44), (30, 75)] {
-            edges.push(edge(i, j, Pose2::new(0.5, -0.2, 0.1), 1e4, EdgeKind::LoopClosure));
+            edges.push(closure(i, j, Pose2::new(0.5, -0.2, 0.1)));
         }
         let candidates: Vec<usize> = (first..edges.len()).collect();
-        let kept = consistent_set(80, &edges, &candidates, CONSISTENT_CHI2);
+        let kept = consistent_set(&edges, &candidates);
         assert_eq!(kept, (first..first + 40).collect::<Vec<_>>());
     }
 
@@ -456,19 +474,13 @@ mod tests {
         let (truth, mut edges) = two_laps();
         let first = edges.len();
         for k in (0..40).step_by(3) {
-            edges.push(edge(
-                k,
-                k + 40,
-                truth[k].between(&truth[k + 40]),
-                1e4,
-                EdgeKind::LoopClosure,
-            ));
+            edges.push(closure(k, k + 40, truth[k].between(&truth[k + 40])));
             if k < 20 {
-                edges.push(edge(k, k + 43, Pose2::IDENTITY, 1e4, EdgeKind::LoopClosure));
+                edges.push(closure(k, k + 43, Pose2::IDENTITY));
             }
         }
         let candidates: Vec<usize> = (first..edges.len()).collect();
-        let whole = consistent_set(80, &edges, &candidates, CONSISTENT_CHI2);
+        let whole = consistent_set(&edges, &candidates);
         assert_eq!(whole.len(), 14);
         assert!(whole.iter().all(|&e| edges[e].to == edges[e].from + 40));
         let mut grown = ConsistencyGraph::default();
@@ -490,34 +502,10 @@ mod tests {
         let mut edges: Vec<Edge> = edges.into_iter().filter(|e| e.to != 40).collect();
         let first = edges.len();
         let off = Pose2::new(3.0, 0.0, 0.0);
-        edges.push(edge(
-            5,
-            45,
-            truth[5].between(&truth[45]),
-            1e4,
-            EdgeKind::LoopClosure,
-        ));
-        edges.push(edge(
-            49,
-            9,
-            truth[49].between(&truth[9]).compose(&off),
-            1e4,
-            EdgeKind::LoopClosure,
-        ));
-        edges.push(edge(
-            2,
-            9,
-            truth[2].between(&truth[9]),
-            1e4,
-            EdgeKind::LoopClosure,
-        ));
-        edges.push(edge(
-            3,
-            10,
-            truth[3].between(&truth[10]).compose(&off),
-            1e4,
-            EdgeKind::LoopClosure,
-        ));
+        edges.push(closure(5, 45, truth[5].between(&truth[45])));
+        edges.push(closure(49, 9, truth[49].between(&truth[9]).compose(&off)));
+        edges.push(closure(2, 9, truth[2].between(&truth[9])));
+        edges.push(closure(3, 10, truth[3].between(&truth[10]).compose(&off)));
         let mut graph = ConsistencyGraph::default();
         graph.update(80, &edges, |e| e >= first, CONSISTENT_CHI2);
         assert!(graph.consistent(0, 1), "across the chains: no evidence");
