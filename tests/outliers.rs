@@ -166,16 +166,21 @@ fn solve_robust_reports_the_injected_edges() {
     let injected: BTreeSet<u64> = (listed["outliers"].as_array().unwrap().iter())
         .map(|o| o["edge_index"].as_u64().unwrap())
         .collect();
-    let r = run_json(&["solve", out.to_str().unwrap(), "--robust", "--json"]);
-    let rejected: BTreeSet<u64> = (r["rejected_edges"].as_array().unwrap().iter())
-        .map(|v| v.as_u64().unwrap())
-        .collect();
-    let caught = injected.intersection(&rejected).count() as f64;
-    let (precision, recall) = (caught / rejected.len() as f64, caught / injected.len() as f64);
-    assert!(
-        precision >= 0.99 && recall >= 0.99,
-        "precision {precision}, recall {recall}"
-    );
+    // the kernel alone, then PCM before it
+    for extra in [None, Some("--pairwise")] {
+        let mut args = vec!["solve", out.to_str().unwrap(), "--robust", "--json"];
+        args.extend(extra);
+        let r = run_json(&args);
+        let rejected: BTreeSet<u64> = (r["rejected_edges"].as_array().unwrap().iter())
+            .map(|v| v.as_u64().unwrap())
+            .collect();
+        let caught = injected.intersection(&rejected).count() as f64;
+        let (precision, recall) = (caught / rejected.len() as f64, caught / injected.len() as f64);
+        assert!(
+            precision >= 0.99 && recall >= 0.99,
+            "{extra:?}: precision {precision}, recall {recall}"
+        );
+    }
     std::fs::remove_file(&out).unwrap();
     std::fs::remove_file(&side).unwrap();
 }

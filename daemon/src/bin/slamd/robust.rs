@@ -15,6 +15,10 @@ pub struct RobustOpts {
     /// Run paper A's cycle-consistency test before the kernel.
     #[arg(long)]
     pub cycles: bool,
+    /// Keep only the largest set of loop closures that agree pairwise
+    /// through the odometry before the kernel (PCM).
+    #[arg(long)]
+    pub pairwise: bool,
 }
 
 impl RobustOpts {
@@ -24,6 +28,7 @@ impl RobustOpts {
             base.kernel = k;
         }
         base.cycles |= self.cycles;
+        base.pairwise |= self.pairwise;
         base
     }
 }
