@@ -1,4 +1,4 @@
-//! The types a frontend and slamd share: planar poses, information
+//! The types a frontend and slamd share: planar and spatial poses, information
 //! matrices, edge kinds, keyframe ids and GPS positions.
 //!
 //! This crate is small on purpose: a frontend that only publishes to a
@@ -18,10 +18,16 @@
 
 mod gps;
 mod information;
+mod information6;
 mod input;
+mod motion;
 mod pose;
+mod pose3;
 
 pub use gps::{check_covariance, Geodetic, GpsError};
 pub use information::{Information, InformationError};
+pub use information6::Information6;
 pub use input::{EdgeInput, EdgeKind, FixInput, KeyframeId};
+pub use motion::RigidMotion;
 pub use pose::{wrap_angle, Pose2};
+pub use pose3::{Pose3, QUATERNION_NORM_TOLERANCE};
