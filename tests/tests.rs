@@ -10,3 +10,4 @@ mod gps;
 mod incremental;
 mod outliers;
 mod restore;
+mod spatial;

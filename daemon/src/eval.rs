@@ -5,8 +5,9 @@
 //! `R = arg Σ g'_k ē'_k` and `t = ḡ − R ē` (Kabsch in the plane).
 
 use crate::geometry::Pose2;
-use crate::graph::{KeyframeId, PoseGraph};
+use crate::graph::{KeyframeId, Pose3, PoseGraph};
 use faer::c64;
+use nalgebra::{Matrix3, Rotation3, Vector3};
 use std::collections::HashMap;
 
 /// The ATE of a set of poses and how many keyframes it covered.
@@ -64,6 +65,47 @@ pub fn ate(graph: &PoseGraph, poses: &[Pose2], truth: &HashMap<KeyframeId, Pose2
     })
 }
 
+/// The rigid motion `x ↦ R x + t` best aligning `from` onto `to` in 3-D
+/// (Kabsch: the SVD of the cross-covariance, with a reflection turned
+/// into a rotation).
+pub fn align_rigid3(from: &[Vector3<f64>], to: &[Vector3<f64>]) -> (Rotation3<f64>, Vector3<f64>) {
+    let n = from.len().max(1) as f64;
+    let cf = from.iter().sum::<Vector3<f64>>() / n;
+    let ct = to.iter().sum::<Vector3<f64>>() / n;
+    let h: Matrix3<f64> = from
+        .iter()
+        .zip(to)
+        .map(|(f, t)| (t - ct) * (f - cf).transpose())
+        .sum();
+    let r = crate::linear::chordal::project_to_rotation(&h);
+    (r, ct - r * cf)
+}
+
+/// ATE of 3-D `poses` (indexed like `graph`) against truth keyed by
+/// keyframe id, after the best rigid alignment. `None` when fewer than
+/// three keyframes match.
+pub fn ate3(graph: &PoseGraph<Pose3>, poses: &[Pose3], truth: &HashMap<KeyframeId, Pose3>) -> Option<Ate> {
+    let (est, gt): (Vec<Vector3<f64>>, Vec<Vector3<f64>>) = graph
+        .keyframes()
+        .iter()
+        .zip(poses)
+        .filter_map(|(k, p)| truth.get(&k.id).map(|g| (p.translation, g.translation)))
+        .unzip();
+    if est.len() < 3 {
+        return None;
+    }
+    let (r, t) = align_rigid3(&est, &gt);
+    let sq: f64 = est
+        .iter()
+        .zip(&gt)
+        .map(|(e, g)| (r * e + t - g).norm_squared())
+        .sum();
+    Some(Ate {
+        rmse: (sq / est.len() as f64).sqrt(),
+        matched: est.len(),
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -86,5 +128,30 @@ mod tests {
         noisy[2].x += 0.4;
         let a = ate(&g, &noisy, &truth).unwrap();
         assert!(a.rmse > 0.1 && a.rmse < 0.4, "{}", a.rmse);
+    }
+
+    #[test]
+    fn a_rigid_motion_in_space_has_zero_ate() {
+        let mut g = PoseGraph::<Pose3>::default();
+        let truth: HashMap<u64, Pose3> = (0..5)
+            .map(|i| {
+                (
+                    i,
+                    Pose3::from_xyz_rpy([i as f64, (i * i) as f64, (i % 2) as f64, 0.0, 0.0, 0.0]),
+                )
+            })
+            .collect();
+        for i in 0..5 {
+            g.add_keyframe(i, None).unwrap();
+        }
+        let m = Pose3::from_xyz_rpy([3.0, -1.0, 2.0, 0.4, -1.2, 2.8]);
+        let moved: Vec<Pose3> = (0..5).map(|i| m.compose(&truth[&i])).collect();
+        let a = ate3(&g, &moved, &truth).unwrap();
+        assert!(a.rmse < 1e-12 && a.matched == 5, "{}", a.rmse);
+        let mut noisy = moved.clone();
+        noisy[2].translation.z += 0.5;
+        // one point off by 0.5 among five: the aligned RMSE lies below 0.5/√5
+        let a = ate3(&g, &noisy, &truth).unwrap();
+        assert!(a.rmse > 0.05 && a.rmse < 0.5 / 5f64.sqrt(), "{}", a.rmse);
     }
 }

@@ -2,9 +2,9 @@
 
 use crate::geometry::Pose2;
 use crate::gps::{variance_factor, Georef, GpsInput};
-use crate::graph::{chi2, Edge, EdgeKind, GraphError, PoseGraph};
-use crate::linear::{two_stage, virtual_frame, Pivot};
-use crate::nonlinear::{polish, LevenbergMarquardtParams, LmReport, Problem};
+use crate::graph::{chi2, Edge, EdgeKind, GraphError, Pose3, PoseGraph};
+use crate::linear::{chordal, two_stage, virtual_frame, Pivot};
+use crate::nonlinear::{polish, LevenbergMarquardtParams, LiePose, LmReport, Problem};
 use crate::outliers::consistency::ConsistencyGraph;
 use crate::outliers::{robust_polish, OutlierConfig, RobustEdges};
 use crate::sparse::FactorError;
@@ -72,6 +72,8 @@ pub enum SolveError {
     Graph(GraphError),
     /// A factorisation failed.
     Factor(FactorError),
+    /// An option this graph's dimension does not have yet.
+    Unsupported(&'static str),
 }
 
 impl fmt::Display for SolveError {
@@ -79,6 +81,7 @@ impl fmt::Display for SolveError {
         match self {
             SolveError::Graph(e) => e.fmt(f),
             SolveError::Factor(e) => e.fmt(f),
+            SolveError::Unsupported(what) => write!(f, "{what} is not available for 3-D graphs"),
         }
     }
 }
@@ -112,11 +115,11 @@ pub struct BatchOptions {
     pub robust: Option<OutlierConfig>,
 }
 
-/// What [`solve_batch`] found.
+/// What [`solve_batch`] (or [`solve_batch3`]) found.
 #[derive(Clone, Debug)]
-pub struct BatchSolution {
+pub struct BatchSolution<P: LiePose = Pose2> {
     /// Final poses, indexed like the graph.
-    pub poses: Vec<Pose2>,
+    pub poses: Vec<P>,
     /// χ² of the final poses.
     pub chi2: f64,
     /// χ² of the linear solution, before any polish.
@@ -126,7 +129,7 @@ pub struct BatchSolution {
     /// Seconds spent polishing.
     pub polish_seconds: f64,
     /// The polish report, when it ran.
-    pub polish: Option<LmReport>,
+    pub polish: Option<LmReport<P>>,
     /// For the virtual-frame formulations: the global scale ρ.
     pub rho: Option<f64>,
     /// For the virtual-frame formulations: the median axis length at ρ = 1.
@@ -137,7 +140,7 @@ pub struct BatchSolution {
     pub switches: Option<Vec<f64>>,
 }
 
-impl BatchSolution {
+impl<P: LiePose> BatchSolution<P> {
     /// Total solve time (I/O excluded).
     pub fn seconds(&self) -> f64 {
         self.linear_seconds + self.polish_seconds
@@ -251,6 +254,50 @@ pub fn solve_batch(graph: &PoseGraph, options: &BatchOptions) -> Result<BatchSol
         median_axis_length,
         georef,
         switches,
+    })
+}
+
+/// Solves a whole 3-D graph at once: the chordal two-stage initialiser
+/// (or odometry), then optionally the polish on g2o's SE(3) cost.
+pub fn solve_batch3(
+    graph: &PoseGraph<Pose3>,
+    options: &BatchOptions,
+) -> Result<BatchSolution<Pose3>, SolveError> {
+    graph.check_connected()?;
+    if options.gps.is_some() {
+        return Err(SolveError::Unsupported("GPS"));
+    }
+    if options.robust.is_some() {
+        return Err(SolveError::Unsupported("the robust polish"));
+    }
+    let start = Instant::now();
+    let poses = match options.formulation {
+        Formulation::TwoStage => chordal::solve(graph)?,
+        Formulation::Odometry => graph.compose_spanning_tree()?,
+        Formulation::VirtualFrame | Formulation::VirtualFramePivot => {
+            return Err(SolveError::Unsupported("the virtual-frame formulation"))
+        }
+    };
+    let linear_seconds = start.elapsed().as_secs_f64();
+    let linear_chi2 = chi2(graph, &poses);
+    let start = Instant::now();
+    let report = match options.polish {
+        true => Some(polish(Problem::edges(graph.edges()), poses.clone(), options.lm)?),
+        false => None,
+    };
+    let polish_seconds = start.elapsed().as_secs_f64();
+    let poses = report.as_ref().map_or(poses, |r| r.poses.clone());
+    Ok(BatchSolution {
+        chi2: chi2(graph, &poses),
+        poses,
+        linear_chi2,
+        linear_seconds,
+        polish_seconds,
+        polish: report,
+        rho: None,
+        median_axis_length: None,
+        georef: None,
+        switches: None,
     })
 }
 

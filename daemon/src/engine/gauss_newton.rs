@@ -22,7 +22,8 @@
 
 use crate::geometry::Pose2;
 use crate::graph::{Edge, PoseGraph};
-use crate::nonlinear::structure::{jacobian, HessianStructure, NONE};
+use crate::nonlinear::se2::jacobian;
+use crate::nonlinear::structure::{HessianStructure, NONE};
 use crate::nonlinear::{PositionPrior, Problem};
 use crate::sparse::dynamic::{AugmentedCholesky, DynamicLdlt, Marginal, UpdateError, MAX_RANK};
 use crate::sparse::FactorError;

@@ -4,9 +4,30 @@
 //! `e_θ = wrap(θ_j − θ_i − θ_ij)`. This is the figure every table in slamd
 //! reports, relative to the optimum of the same file (docs/design.md, "Scoring: χ² and ATE").
 
-use super::{Edge, PoseGraph};
+use super::{Edge, PoseGraph, RigidMotion};
 use crate::geometry::{wrap_angle, Pose2};
 use num_complex::Complex64;
+
+/// A pose type whose edges have an error vector and a χ²: g2o's cost in
+/// each dimension (SE(2) here, SE(3) in [`super::cost3`]).
+pub trait EdgeCost: RigidMotion {
+    /// The error vector, `DOF` numbers.
+    type Error: Copy + std::fmt::Debug + AsRef<[f64]>;
+    /// The error of `edge` at poses `xi`, `xj`.
+    fn edge_error(edge: &Edge<Self>, xi: &Self, xj: &Self) -> Self::Error;
+    /// `eᵀ Ω e`.
+    fn mahalanobis(information: &Self::Information, e: &Self::Error) -> f64;
+}
+
+impl EdgeCost for Pose2 {
+    type Error = [f64; 3];
+    fn edge_error(edge: &Edge, xi: &Pose2, xj: &Pose2) -> [f64; 3] {
+        edge_error(edge, xi, xj)
+    }
+    fn mahalanobis(information: &super::Information, e: &[f64; 3]) -> f64 {
+        information.mahalanobis(e)
+    }
+}
 
 /// The error vector `[e_x, e_y, e_θ]` of one edge at poses `xi`, `xj`.
 pub fn edge_error(edge: &Edge, xi: &Pose2, xj: &Pose2) -> [f64; 3] {
@@ -31,18 +52,18 @@ pub fn edge_error_turned(
 }
 
 /// `eᵀ Ω e` of one edge at the given poses (indexed like the graph).
-pub fn edge_chi2(edge: &Edge, poses: &[Pose2]) -> f64 {
-    let e = edge_error(edge, &poses[edge.from], &poses[edge.to]);
-    edge.information.mahalanobis(&e)
+pub fn edge_chi2<P: EdgeCost>(edge: &Edge<P>, poses: &[P]) -> f64 {
+    let e = P::edge_error(edge, &poses[edge.from], &poses[edge.to]);
+    P::mahalanobis(&edge.information, &e)
 }
 
 /// The total χ² of a graph at the given poses.
-pub fn chi2(graph: &PoseGraph, poses: &[Pose2]) -> f64 {
+pub fn chi2<P: EdgeCost>(graph: &PoseGraph<P>, poses: &[P]) -> f64 {
     chi2_of_edges(graph.edges(), poses)
 }
 
 /// χ² summed over a slice of edges.
-pub fn chi2_of_edges(edges: &[Edge], poses: &[Pose2]) -> f64 {
+pub fn chi2_of_edges<P: EdgeCost>(edges: &[Edge<P>], poses: &[P]) -> f64 {
     edges.iter().map(|e| edge_chi2(e, poses)).sum()
 }
 

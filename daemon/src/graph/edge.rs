@@ -1,21 +1,22 @@
 //! [`Edge`]: one relative-pose measurement between two keyframes.
 
-use super::{EdgeKind, Information};
+use super::{EdgeKind, RigidMotion};
 use crate::geometry::Pose2;
 
 /// A measurement `T_ij` of keyframe `j` seen from keyframe `i`, with its
 /// information matrix Ω_ij. `from` and `to` are indices into a
 /// [`PoseGraph`](super::PoseGraph).
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Edge {
+pub struct Edge<P: RigidMotion = Pose2> {
     /// Index of keyframe `i`.
     pub from: usize,
     /// Index of keyframe `j`.
     pub to: usize,
     /// `T_ij`, the pose of `j` in the frame of `i`.
-    pub measurement: Pose2,
-    /// Ω_ij over the error `t2v(T_ij⁻¹ T_i⁻¹ T_j)`.
-    pub information: Information,
+    pub measurement: P,
+    /// Ω_ij over the error of `T_ij⁻¹ T_i⁻¹ T_j` (`t2v` in the plane,
+    /// `[Δt, Δq_xyz]` in space).
+    pub information: P::Information,
     /// What produced it.
     pub kind: EdgeKind,
 }
@@ -29,14 +30,16 @@ impl Edge {
             from,
             to,
             measurement: z,
-            information: Information::identity(),
+            information: super::Information::identity(),
             kind: EdgeKind::LoopClosure,
         }
     }
+}
 
+impl<P: RigidMotion> Edge<P> {
     /// The edge written the other way, `(j, i, T_ij⁻¹)`, information kept.
-    pub fn reversed(&self) -> Edge {
-        Edge {
+    pub fn reversed(&self) -> Self {
+        Self {
             from: self.to,
             to: self.from,
             measurement: self.measurement.inverse(),

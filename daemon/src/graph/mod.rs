@@ -5,14 +5,17 @@
 //! the origin by every solver.
 
 mod cost;
+mod cost3;
 mod edge;
 
-pub use cost::{chi2, chi2_of_edges, edge_chi2, edge_error, edge_error_turned};
+pub use cost::{chi2, chi2_of_edges, edge_chi2, edge_error, edge_error_turned, EdgeCost};
+pub use cost3::{edge_error3, Delta3};
 pub use edge::Edge;
 use slamd_types::EdgeInput;
-pub use slamd_types::{EdgeKind, Information, InformationError, KeyframeId};
+pub use slamd_types::{EdgeKind, Information, Information6, InformationError, KeyframeId, Pose3};
 
 use crate::geometry::Pose2;
+pub use slamd_types::RigidMotion;
 use std::collections::{HashMap, VecDeque};
 use std::fmt;
 
@@ -68,19 +71,22 @@ impl From<InformationError> for GraphError {
 
 /// A keyframe: its id and, if the source gave one, an initial guess.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Keyframe {
+pub struct Keyframe<P: RigidMotion = Pose2> {
     /// The frontend's id.
     pub id: KeyframeId,
     /// The initial pose from the source (a `VERTEX` line), if any.
-    pub guess: Option<Pose2>,
+    pub guess: Option<P>,
 }
 
 /// Keyframes plus edges, with a map from ids to indices.
+///
+/// `P` is the pose type: [`Pose2`] for planar graphs (the default),
+/// [`Pose3`](slamd_types::Pose3) for spatial ones.
 #[derive(Clone, Debug, Default)]
-pub struct PoseGraph {
-    keyframes: Vec<Keyframe>,
+pub struct PoseGraph<P: RigidMotion = Pose2> {
+    keyframes: Vec<Keyframe<P>>,
     index: HashMap<KeyframeId, usize>,
-    edges: Vec<Edge>,
+    edges: Vec<Edge<P>>,
 }
 
 impl PoseGraph {
@@ -95,11 +101,13 @@ impl PoseGraph {
             edge.kind,
         )
     }
+}
 
+impl<P: RigidMotion> PoseGraph<P> {
     /// Builds a graph whose keyframes are `keyframes` sorted by id.
-    pub fn with_keyframes(mut keyframes: Vec<Keyframe>) -> Result<Self, GraphError> {
+    pub fn with_keyframes(mut keyframes: Vec<Keyframe<P>>) -> Result<Self, GraphError> {
         keyframes.sort_by_key(|k| k.id);
-        let mut graph = PoseGraph::default();
+        let mut graph = Self::default();
         for k in keyframes {
             graph.add_keyframe(k.id, k.guess)?;
         }
@@ -108,8 +116,8 @@ impl PoseGraph {
 
     /// A graph from keyframes (in index order, ids distinct) and edges that
     /// already refer to keyframe indices.
-    pub fn from_parts(keyframes: Vec<Keyframe>, edges: Vec<Edge>) -> Result<Self, GraphError> {
-        let mut graph = PoseGraph::default();
+    pub fn from_parts(keyframes: Vec<Keyframe<P>>, edges: Vec<Edge<P>>) -> Result<Self, GraphError> {
+        let mut graph = Self::default();
         for k in keyframes {
             graph.add_keyframe(k.id, k.guess)?;
         }
@@ -124,7 +132,7 @@ impl PoseGraph {
 
     /// Appends a keyframe and returns its index. Ids need not be sorted here,
     /// but index 0 (the gauge) is whichever keyframe comes first.
-    pub fn add_keyframe(&mut self, id: KeyframeId, guess: Option<Pose2>) -> Result<usize, GraphError> {
+    pub fn add_keyframe(&mut self, id: KeyframeId, guess: Option<P>) -> Result<usize, GraphError> {
         if self.index.contains_key(&id) {
             return Err(GraphError::DuplicateKeyframe(id));
         }
@@ -147,8 +155,8 @@ impl PoseGraph {
         &mut self,
         from: KeyframeId,
         to: KeyframeId,
-        measurement: Pose2,
-        information: Information,
+        measurement: P,
+        information: P::Information,
         kind: EdgeKind,
     ) -> Result<usize, GraphError> {
         if from == to {
@@ -181,17 +189,17 @@ impl PoseGraph {
     }
 
     /// The keyframes, by index.
-    pub fn keyframes(&self) -> &[Keyframe] {
+    pub fn keyframes(&self) -> &[Keyframe<P>] {
         &self.keyframes
     }
 
     /// The edges, in insertion (file) order.
-    pub fn edges(&self) -> &[Edge] {
+    pub fn edges(&self) -> &[Edge<P>] {
         &self.edges
     }
 
     /// Mutable access to the edges (reweighting); the topology stays.
-    pub fn edges_mut(&mut self) -> &mut [Edge] {
+    pub fn edges_mut(&mut self) -> &mut [Edge<P>] {
         &mut self.edges
     }
 
@@ -224,8 +232,8 @@ impl PoseGraph {
     }
 
     /// A copy with the edges permuted into `order`.
-    pub fn reordered(&self, order: &[usize]) -> PoseGraph {
-        PoseGraph {
+    pub fn reordered(&self, order: &[usize]) -> Self {
+        Self {
             keyframes: self.keyframes.clone(),
             index: self.index.clone(),
             edges: order.iter().map(|&e| self.edges[e]).collect(),
@@ -234,11 +242,11 @@ impl PoseGraph {
 
     /// The sub-graph of keyframes `0..n` and the edges among them, keeping
     /// edge order. Used to check online results against batch prefixes.
-    pub fn prefix(&self, n: usize) -> PoseGraph {
+    pub fn prefix(&self, n: usize) -> Self {
         let keyframes = self.keyframes[..n].to_vec();
         let index = keyframes.iter().enumerate().map(|(i, k)| (k.id, i)).collect();
         let edges = self.edges.iter().filter(|e| e.newer() < n).copied().collect();
-        PoseGraph {
+        Self {
             keyframes,
             index,
             edges,
@@ -288,14 +296,14 @@ impl PoseGraph {
 
     /// Poses composed along a breadth-first spanning tree from the gauge,
     /// odometry edges first: the classic "initial guess from odometry".
-    pub fn compose_spanning_tree(&self) -> Result<Vec<Pose2>, GraphError> {
+    pub fn compose_spanning_tree(&self) -> Result<Vec<P>, GraphError> {
         self.check_connected()?;
         let mut adj = self.adjacency();
         for list in &mut adj {
             list.sort_by_key(|&(_, e)| (self.edges[e].kind != EdgeKind::Odometry, e));
         }
-        let mut poses: Vec<Option<Pose2>> = vec![None; self.len()];
-        poses[0] = Some(Pose2::IDENTITY);
+        let mut poses: Vec<Option<P>> = vec![None; self.len()];
+        poses[0] = Some(P::IDENTITY);
         let mut queue = VecDeque::from([0usize]);
         while let Some(k) = queue.pop_front() {
             let pk = poses[k].unwrap_or_default();
@@ -317,10 +325,10 @@ impl PoseGraph {
 
     /// The initial guess of the source (its `VERTEX` lines) where every
     /// keyframe has one, else the spanning-tree composition.
-    pub fn initial_guess(&self) -> Result<Vec<Pose2>, GraphError> {
-        let guesses: Option<Vec<Pose2>> = self.keyframes.iter().map(|k| k.guess).collect();
+    pub fn initial_guess(&self) -> Result<Vec<P>, GraphError> {
+        let guesses: Option<Vec<P>> = self.keyframes.iter().map(|k| k.guess).collect();
         match guesses {
-            Some(g) if g.iter().any(|p| *p != Pose2::IDENTITY) => Ok(g),
+            Some(g) if g.iter().any(|p| *p != P::IDENTITY) => Ok(g),
             _ => self.compose_spanning_tree(),
         }
     }
@@ -330,7 +338,7 @@ impl PoseGraph {
 /// unknown `k − 1`): AMD on the graph of `edges`. Every normal matrix slamd
 /// builds over these keyframes (axes, positions, Gauss–Newton blocks) has
 /// this graph as its pattern, so one ordering serves them all.
-pub fn pose_ordering(n: usize, edges: &[Edge]) -> Vec<usize> {
+pub fn pose_ordering<P: RigidMotion>(n: usize, edges: &[Edge<P>]) -> Vec<usize> {
     let free = edges
         .iter()
         .filter(|e| e.from > 0 && e.to > 0)

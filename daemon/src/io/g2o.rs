@@ -11,7 +11,7 @@ pub(crate) fn parse_line(tokens: &[&str]) -> Result<Record, ReadErrorKind> {
         // FIX pins a vertex; slamd always fixes the first keyframe.
         "FIX" => Ok(Record::Skip),
         tag if tag.contains("SE3") || tag.ends_with('3') => Err(ReadErrorKind::Malformed(format!(
-            "`{tag}`: 3-D records are not supported; slamd solves planar graphs"
+            "`{tag}`: a 3-D record in a 2-D graph"
         ))),
         tag => Err(ReadErrorKind::Malformed(format!("unknown g2o record `{tag}`"))),
     }

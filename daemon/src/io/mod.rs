@@ -12,17 +12,18 @@ mod g2o;
 mod gps_csv;
 mod isam;
 mod poses;
+mod spatial;
 pub mod svg;
 mod toro;
 mod write;
 
 pub use error::{ReadError, ReadErrorKind};
 pub use gps_csv::{read_fixes, FixRecord};
-pub use poses::{read_ground_truth, read_pose_table};
-pub use write::{write_g2o, write_pose_table};
+pub use poses::{read_ground_truth, read_ground_truth3, read_pose_table};
+pub use write::{write_g2o, write_g2o3, write_pose_table};
 
 use crate::geometry::Pose2;
-use crate::graph::{EdgeKind, GraphError, Information, Keyframe, KeyframeId, PoseGraph};
+use crate::graph::{EdgeKind, GraphError, Information, Keyframe, KeyframeId, Pose3, PoseGraph, RigidMotion};
 use crate::store::MapFile;
 use std::collections::{BTreeSet, HashSet};
 use std::path::Path;
@@ -39,12 +40,64 @@ pub enum Format {
     /// iSAM: `EDGE2` or `ODOMETRY i j dx dy dθ` + the upper-triangular square
     /// root of the information matrix.
     Isam,
+    /// g2o 3-D: `VERTEX_SE3:QUAT id x y z qx qy qz qw`,
+    /// `EDGE_SE3:QUAT i j x y z qx qy qz qw` + 21 information entries
+    /// (upper triangle, row by row, over x y z qx qy qz).
+    G2o3,
+    /// HOG-Man 3-D: `VERTEX3 id x y z roll pitch yaw`,
+    /// `EDGE3 i j x y z roll pitch yaw` + 21 information entries over
+    /// x y z roll pitch yaw.
+    HogMan3,
+    /// iSAM 3-D: `EDGE3 i j x y z roll pitch yaw` + 21 entries of the
+    /// upper-triangular square root of the information, no vertices.
+    Isam3,
+}
+
+/// Whether a graph is planar or spatial.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Dimension {
+    /// SE(2): `(x, y, θ)` poses.
+    #[serde(rename = "2d")]
+    Planar,
+    /// SE(3): position and quaternion.
+    #[serde(rename = "3d")]
+    Spatial,
 }
 
 impl Format {
-    /// Guesses the format from the extension, then from the first record.
+    /// Whether the format holds planar or spatial graphs.
+    pub fn dimension(self) -> Dimension {
+        match self {
+            Format::G2o | Format::Toro | Format::Isam => Dimension::Planar,
+            Format::G2o3 | Format::HogMan3 | Format::Isam3 => Dimension::Spatial,
+        }
+    }
+
+    /// Guesses the format: a 3-D record decides first (`EDGE3` is HOG-Man's
+    /// in a `.graph` file or beside `VERTEX3` lines, else iSAM's), then the
+    /// extension, then the first 2-D record.
     pub fn detect(path: &Path, text: &str) -> Format {
-        match path.extension().and_then(|e| e.to_str()) {
+        let ext = path.extension().and_then(|e| e.to_str());
+        let mut edge3 = false;
+        for tag in text
+            .lines()
+            .take(4096)
+            .filter_map(|l| l.split_whitespace().next())
+        {
+            match tag {
+                "VERTEX_SE3:QUAT" | "EDGE_SE3:QUAT" => return Format::G2o3,
+                "VERTEX3" => return Format::HogMan3,
+                "EDGE3" if ext == Some("graph") => return Format::HogMan3,
+                "EDGE3" => edge3 = true,
+                "VERTEX_SE2" | "EDGE_SE2" | "VERTEX2" | "EDGE2" | "ODOMETRY" => break,
+                _ => {}
+            }
+        }
+        if edge3 {
+            return Format::Isam3;
+        }
+        match ext {
             Some("g2o") => return Format::G2o,
             Some("graph") => return Format::Toro,
             _ => {}
@@ -68,9 +121,9 @@ impl Format {
 
 /// One parsed line of a graph file.
 #[derive(Debug, PartialEq)]
-pub(crate) enum Record {
-    Vertex(KeyframeId, Pose2),
-    Edge(KeyframeId, KeyframeId, Pose2, Information),
+pub(crate) enum Record<P: RigidMotion = Pose2> {
+    Vertex(KeyframeId, P),
+    Edge(KeyframeId, KeyframeId, P, P::Information),
     Skip,
 }
 
@@ -114,7 +167,82 @@ pub fn read_graph_with(path: &Path, on_invalid: OnInvalid) -> Result<(PoseGraph,
     let text = String::from_utf8(bytes)
         .map_err(|e| ReadError::io(path, std::io::Error::new(std::io::ErrorKind::InvalidData, e)))?;
     let format = Format::detect(path, &text);
+    if format.dimension() == Dimension::Spatial {
+        return Err(ReadError {
+            path: path.to_owned(),
+            line: None,
+            kind: ReadErrorKind::Malformed(
+                "a 3-D pose graph; this command works on 2-D graphs (`slamd solve` and `slamd eval` read both)".into(),
+            ),
+        });
+    }
     parse_graph_with(path, &text, format, on_invalid)
+}
+
+/// A pose graph of either dimension, as read from a file.
+#[derive(Clone, Debug)]
+pub enum AnyGraph {
+    /// A 2-D graph.
+    Planar(PoseGraph),
+    /// A 3-D graph.
+    Spatial(PoseGraph<Pose3>),
+}
+
+/// Reads a graph file of either dimension, detecting its format; with
+/// [`OnInvalid::Skip`] returns the lines left out.
+pub fn read_any_graph_with(
+    path: &Path,
+    on_invalid: OnInvalid,
+) -> Result<(AnyGraph, Vec<ReadError>), ReadError> {
+    let bytes = std::fs::read(path).map_err(|e| ReadError::io(path, e))?;
+    if MapFile::sniff(&bytes) {
+        return read_graph_with(path, on_invalid).map(|(g, s)| (AnyGraph::Planar(g), s));
+    }
+    let text = String::from_utf8(bytes)
+        .map_err(|e| ReadError::io(path, std::io::Error::new(std::io::ErrorKind::InvalidData, e)))?;
+    let format = Format::detect(path, &text);
+    match format.dimension() {
+        Dimension::Planar => {
+            parse_graph_with(path, &text, format, on_invalid).map(|(g, s)| (AnyGraph::Planar(g), s))
+        }
+        Dimension::Spatial => {
+            parse_graph3_with(path, &text, format, on_invalid).map(|(g, s)| (AnyGraph::Spatial(g), s))
+        }
+    }
+}
+
+/// Reads a 3-D graph file, detecting its format; refuses a 2-D one.
+pub fn read_graph3(path: &Path) -> Result<PoseGraph<Pose3>, ReadError> {
+    match read_any_graph_with(path, OnInvalid::Refuse)? {
+        (AnyGraph::Spatial(g), _) => Ok(g),
+        (AnyGraph::Planar(_), _) => Err(ReadError {
+            path: path.to_owned(),
+            line: None,
+            kind: ReadErrorKind::Malformed("a 2-D pose graph where a 3-D one is needed".into()),
+        }),
+    }
+}
+
+/// Parses 3-D graph text of a known format. `path` only labels errors.
+pub fn parse_graph3_with(
+    path: &Path,
+    text: &str,
+    format: Format,
+    on_invalid: OnInvalid,
+) -> Result<(PoseGraph<Pose3>, Vec<ReadError>), ReadError> {
+    let parse_line = match format {
+        Format::G2o3 => spatial::parse_g2o,
+        Format::HogMan3 => spatial::parse_hogman,
+        Format::Isam3 => spatial::parse_isam,
+        Format::G2o | Format::Toro | Format::Isam => {
+            return Err(ReadError {
+                path: path.to_owned(),
+                line: None,
+                kind: ReadErrorKind::Malformed("a 2-D pose graph where a 3-D one is needed".into()),
+            })
+        }
+    };
+    parse_records(path, text, parse_line, on_invalid)
 }
 
 /// Parses graph text of a known format. `path` only labels errors.
@@ -134,7 +262,24 @@ pub fn parse_graph_with(
         Format::G2o => g2o::parse_line,
         Format::Toro => toro::parse_line,
         Format::Isam => isam::parse_line,
+        Format::G2o3 | Format::HogMan3 | Format::Isam3 => {
+            return Err(ReadError {
+                path: path.to_owned(),
+                line: None,
+                kind: ReadErrorKind::Malformed("a 3-D pose graph where a 2-D one is needed".into()),
+            })
+        }
     };
+    parse_records(path, text, parse_line, on_invalid)
+}
+
+/// Parses every line with `parse_line` and builds the graph.
+fn parse_records<P: RigidMotion>(
+    path: &Path,
+    text: &str,
+    parse_line: fn(&[&str]) -> Result<Record<P>, ReadErrorKind>,
+    on_invalid: OnInvalid,
+) -> Result<(PoseGraph<P>, Vec<ReadError>), ReadError> {
     let mut bad = Invalid {
         on_invalid,
         skipped: Vec::new(),
@@ -179,18 +324,18 @@ impl Invalid {
     }
 }
 
-type VertexLine = (usize, KeyframeId, Pose2);
-type EdgeLine = (usize, KeyframeId, KeyframeId, Pose2, Information);
+type VertexLine<P> = (usize, KeyframeId, P);
+type EdgeLine<P> = (usize, KeyframeId, KeyframeId, P, <P as RigidMotion>::Information);
 
 /// Builds the graph. With `VERTEX` lines, an edge to an undeclared keyframe is
 /// an error; without any, the keyframes are the edge end points.
-fn assemble(
+fn assemble<P: RigidMotion>(
     path: &Path,
-    vertices: Vec<VertexLine>,
-    edges: Vec<EdgeLine>,
+    vertices: Vec<VertexLine<P>>,
+    edges: Vec<EdgeLine<P>>,
     bad: &mut Invalid,
-) -> Result<PoseGraph, ReadError> {
-    let keyframes: Vec<Keyframe> = if vertices.is_empty() {
+) -> Result<PoseGraph<P>, ReadError> {
+    let keyframes: Vec<Keyframe<P>> = if vertices.is_empty() {
         // a skipped self-edge does not declare its keyframe
         let skips = bad.on_invalid == OnInvalid::Skip;
         let ids: BTreeSet<KeyframeId> = (edges.iter())

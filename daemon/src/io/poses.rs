@@ -73,6 +73,19 @@ pub fn read_ground_truth(path: &Path) -> Result<HashMap<KeyframeId, Pose2>, Read
     }
 }
 
+/// Reads 3-D ground truth: a noise-free 3-D graph file, its vertices
+/// where it has any, else its edges composed along a spanning tree.
+pub fn read_ground_truth3(path: &Path) -> Result<HashMap<KeyframeId, crate::graph::Pose3>, ReadError> {
+    let graph = super::read_graph3(path)?;
+    let poses = graph.initial_guess().map_err(|e| ReadError::graph(path, e))?;
+    Ok(graph
+        .keyframes()
+        .iter()
+        .zip(poses)
+        .map(|(k, p)| (k.id, p))
+        .collect())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -1,7 +1,7 @@
 //! Writing results: g2o (vertices plus the graph's edges) and `id x y θ`.
 
 use crate::geometry::Pose2;
-use crate::graph::PoseGraph;
+use crate::graph::{Pose3, PoseGraph};
 use std::io::Write;
 
 /// Writes the graph as g2o with `poses` as its vertices.
@@ -26,6 +26,26 @@ pub fn write_g2o(out: &mut impl Write, graph: &PoseGraph, poses: &[Pose2]) -> st
             u[3],
             u[4],
             u[5]
+        )?;
+    }
+    Ok(())
+}
+
+/// Writes a 3-D graph as g2o (`VERTEX_SE3:QUAT`, `EDGE_SE3:QUAT`) with
+/// `poses` as its vertices.
+pub fn write_g2o3(out: &mut impl Write, graph: &PoseGraph<Pose3>, poses: &[Pose3]) -> std::io::Result<()> {
+    let join = |v: &[f64]| v.iter().map(|x| x.to_string()).collect::<Vec<_>>().join(" ");
+    for (k, p) in graph.keyframes().iter().zip(poses) {
+        writeln!(out, "VERTEX_SE3:QUAT {} {}", k.id, join(&p.to_xyz_quaternion()))?;
+    }
+    for e in graph.edges() {
+        writeln!(
+            out,
+            "EDGE_SE3:QUAT {} {} {} {}",
+            graph.id_of(e.from),
+            graph.id_of(e.to),
+            join(&e.measurement.to_xyz_quaternion()),
+            join(&e.information.upper())
         )?;
     }
     Ok(())

@@ -1,4 +1,4 @@
-//! [`LevenbergMarquardt`]: the damped polish on g2o's SE(2) cost.
+//! [`LevenbergMarquardt`]: the damped polish on g2o's SE(2) and SE(3) costs.
 //!
 //! Each iteration solves `(H + λ D) δ = −g`, with `H = Σ Jᵀ Ω J`,
 //! `g = Σ Jᵀ Ω e` and `D = diag(H)` (Marquardt's scaling), and accepts the
@@ -8,9 +8,12 @@
 //! the damping.
 //!
 //! The pattern of `H` and its fill-reducing ordering (AMD on the pose graph,
-//! each pose's 3 variables kept together) are computed once; each iteration only refills
-//! values and refactorises.
+//! each pose's `DOF` variables kept together) are computed once; each
+//! iteration only refills values and refactorises. A step moves each pose
+//! by [`LiePose::retract`]: additively in the plane, on the manifold in
+//! space.
 
+use super::lie::LiePose;
 use super::params::LevenbergMarquardtParams;
 use super::prior::Problem;
 use super::structure::{gauge_first_blocks, HessianStructure};
@@ -35,9 +38,9 @@ pub struct Iteration {
 
 /// What the polish did.
 #[derive(Clone, Debug)]
-pub struct LmReport {
+pub struct LmReport<P = Pose2> {
     /// The final poses.
-    pub poses: Vec<Pose2>,
+    pub poses: Vec<P>,
     /// χ² at the start.
     pub initial_chi2: f64,
     /// χ² at the end.
@@ -49,14 +52,14 @@ pub struct LmReport {
 }
 
 /// Damped Gauss–Newton over the poses of a graph; pose 0 stays fixed.
-pub struct LevenbergMarquardt<'a> {
-    problem: Problem<'a>,
-    structure: HessianStructure,
+pub struct LevenbergMarquardt<'a, P: LiePose = Pose2> {
+    problem: Problem<'a, P>,
+    structure: HessianStructure<P>,
     factor: SparseCholesky<f64>,
     hessian: UpperCsc<f64>,
     damped: UpperCsc<f64>,
     gradient: Vec<f64>,
-    poses: Vec<Pose2>,
+    poses: Vec<P>,
     chi2: f64,
     lambda: f64,
     nu: f64,
@@ -66,12 +69,12 @@ pub struct LevenbergMarquardt<'a> {
     converged: bool,
 }
 
-impl<'a> LevenbergMarquardt<'a> {
+impl<'a, P: LiePose> LevenbergMarquardt<'a, P> {
     /// Prepares the polish of `problem` from `initial` (one pose per
     /// keyframe).
     pub fn new(
-        problem: Problem<'a>,
-        initial: Vec<Pose2>,
+        problem: Problem<'a, P>,
+        initial: Vec<P>,
         params: LevenbergMarquardtParams,
     ) -> Result<Self, FactorError> {
         let n = initial.len();
@@ -79,7 +82,7 @@ impl<'a> LevenbergMarquardt<'a> {
         let hessian = structure.pattern().clone();
         let poses = pose_ordering(initial.len(), problem.edges);
         let factor =
-            SparseCholesky::analyze_supernodal(&hessian, &Ordering::Custom(expand_blocks(&poses, 3)))?;
+            SparseCholesky::analyze_supernodal(&hessian, &Ordering::Custom(expand_blocks(&poses, P::DOF)))?;
         let chi2 = problem.chi2(&initial);
         let mut lm = Self {
             problem,
@@ -107,7 +110,7 @@ impl<'a> LevenbergMarquardt<'a> {
     }
 
     /// Current poses.
-    pub fn poses(&self) -> &[Pose2] {
+    pub fn poses(&self) -> &[P] {
         &self.poses
     }
 
@@ -151,16 +154,13 @@ impl<'a> LevenbergMarquardt<'a> {
         }
         let rhs: Vec<f64> = self.gradient.iter().map(|g| -g).collect();
         let delta = self.factor.solve(&rhs);
-        let candidate: Vec<Pose2> = self
+        let candidate: Vec<P> = self
             .poses
             .iter()
             .enumerate()
             .map(|(k, p)| match k {
                 0 => *p,
-                _ => {
-                    let o = 3 * (k - 1);
-                    Pose2::new(p.x + delta[o], p.y + delta[o + 1], p.theta + delta[o + 2])
-                }
+                _ => p.retract(&delta[P::DOF * (k - 1)..P::DOF * k]),
             })
             .collect();
         let new_chi2 = self.problem.chi2(&candidate);
@@ -205,7 +205,7 @@ impl<'a> LevenbergMarquardt<'a> {
     }
 
     /// Iterates until converged, the iteration cap, or the problem's stop.
-    pub fn optimize(mut self) -> Result<LmReport, FactorError> {
+    pub fn optimize(mut self) -> Result<LmReport<P>, FactorError> {
         while !self.converged && self.iterations.len() < self.params.max_iterations && !self.problem.stopped()
         {
             self.iterate()?;
@@ -221,10 +221,10 @@ impl<'a> LevenbergMarquardt<'a> {
 }
 
 /// Polishes `initial` on `problem` to convergence.
-pub fn polish(
-    problem: Problem<'_>,
-    initial: Vec<Pose2>,
+pub fn polish<P: LiePose>(
+    problem: Problem<'_, P>,
+    initial: Vec<P>,
     params: LevenbergMarquardtParams,
-) -> Result<LmReport, FactorError> {
+) -> Result<LmReport<P>, FactorError> {
     LevenbergMarquardt::new(problem, initial, params)?.optimize()
 }

@@ -2,32 +2,29 @@
 //! [`Problem`]: the cost the polish minimises, with [`Robust`] switches
 //! on loop closures.
 
+use super::lie::LiePose;
 use crate::geometry::Pose2;
 use crate::graph::{chi2_of_edges, edge_chi2, Edge};
 use crate::robust::Kernel;
-use faer::c64;
-use nalgebra::Matrix2;
 use std::sync::atomic::{AtomicBool, Ordering};
 
 /// `p_k ≈ target` in the map frame with information Ω (a GPS fix carried
-/// into the map frame by the georeference). Its error `e = p_k − target`
-/// has the Jacobian `[I₂ 0]` on `(x, y, θ)`.
+/// into the map frame by the georeference), `e = p_k − target`. In the
+/// plane the target is `x + iy` and Ω is 2×2; in space both are 3-D.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct PositionPrior {
+pub struct PositionPrior<P: LiePose = Pose2> {
     /// Keyframe index.
     pub keyframe: usize,
     /// Map-frame position.
-    pub target: c64,
-    /// 2×2 information over (x, y).
-    pub information: Matrix2<f64>,
+    pub target: P::Position,
+    /// Information over the position.
+    pub information: P::PositionInformation,
 }
 
-impl PositionPrior {
+impl<P: LiePose> PositionPrior<P> {
     /// `eᵀ Ω e` at `poses`.
-    pub fn chi2(&self, poses: &[Pose2]) -> f64 {
-        let e = poses[self.keyframe].position() - self.target;
-        let v = nalgebra::Vector2::new(e.re, e.im);
-        (v.transpose() * self.information * v)[0]
+    pub fn chi2(&self, poses: &[P]) -> f64 {
+        poses[self.keyframe].prior_chi2(&self.target, &self.information)
     }
 }
 
@@ -44,11 +41,11 @@ pub struct Robust<'a> {
 /// What the polish minimises: g2o's SE(2) cost of the edges (a robust
 /// cost `ρ(χ²)` on switchable ones) plus the priors' `eᵀΩe`.
 #[derive(Clone, Copy, Debug)]
-pub struct Problem<'a> {
+pub struct Problem<'a, P: LiePose = Pose2> {
     /// Relative-pose edges.
-    pub edges: &'a [Edge],
+    pub edges: &'a [Edge<P>],
     /// Absolute position priors.
-    pub priors: &'a [PositionPrior],
+    pub priors: &'a [PositionPrior<P>],
     /// Switchable edges, if any.
     pub robust: Option<Robust<'a>>,
     /// Asked before every iteration: once set, the polish ends where it
@@ -56,14 +53,14 @@ pub struct Problem<'a> {
     pub stop: Option<&'a AtomicBool>,
 }
 
-impl<'a> Problem<'a> {
+impl<'a, P: LiePose> Problem<'a, P> {
     /// Edges only.
-    pub fn edges(edges: &'a [Edge]) -> Self {
+    pub fn edges(edges: &'a [Edge<P>]) -> Self {
         Self::new(edges, &[])
     }
 
     /// Edges and priors, no switches.
-    pub fn new(edges: &'a [Edge], priors: &'a [PositionPrior]) -> Self {
+    pub fn new(edges: &'a [Edge<P>], priors: &'a [PositionPrior<P>]) -> Self {
         Self {
             edges,
             priors,
@@ -78,7 +75,7 @@ impl<'a> Problem<'a> {
     }
 
     /// The total cost at `poses`.
-    pub fn chi2(&self, poses: &[Pose2]) -> f64 {
+    pub fn chi2(&self, poses: &[P]) -> f64 {
         let priors = self.priors.iter().map(|p| p.chi2(poses)).sum::<f64>();
         let Some(r) = &self.robust else {
             return chi2_of_edges(self.edges, poses) + priors;
@@ -98,7 +95,7 @@ impl<'a> Problem<'a> {
 
     /// The IRLS weight `s²` of every edge at `poses` (1 where not
     /// switchable), or `None` without switches.
-    pub fn weights(&self, poses: &[Pose2]) -> Option<Vec<f64>> {
+    pub fn weights(&self, poses: &[P]) -> Option<Vec<f64>> {
         let r = self.robust.as_ref()?;
         Some(
             (self.edges.iter().zip(r.switchable))

@@ -12,7 +12,7 @@
 
 use crate::geometry::Pose2;
 use crate::graph::{edge_error, Edge};
-use nalgebra::{Matrix3, Vector3};
+use nalgebra::{Matrix3, Matrix3x6, Matrix6, Vector3, Vector6};
 
 /// The error of an edge and its Jacobians with respect to both poses.
 #[derive(Clone, Copy, Debug)]
@@ -39,6 +39,22 @@ pub fn linearize(edge: &Edge, xi: &Pose2, xj: &Pose2) -> LinearizedEdge {
         a,
         b,
     }
+}
+
+/// The edge's Jacobian `J = [A B]` (3×6) at the given poses, with its error.
+pub fn jacobian(edge: &Edge, xi: &Pose2, xj: &Pose2) -> (Matrix3x6<f64>, nalgebra::Vector3<f64>) {
+    let lin = linearize(edge, xi, xj);
+    let mut j = Matrix3x6::zeros();
+    j.fixed_view_mut::<3, 3>(0, 0).copy_from(&lin.a);
+    j.fixed_view_mut::<3, 3>(0, 3).copy_from(&lin.b);
+    (j, lin.error)
+}
+
+/// `(Jᵀ Ω J, Jᵀ Ω e)` of one edge.
+pub fn local_system(edge: &Edge, xi: &Pose2, xj: &Pose2) -> (Matrix6<f64>, Vector6<f64>) {
+    let (j, e) = jacobian(edge, xi, xj);
+    let omega_j = edge.information.matrix() * j;
+    (j.transpose() * omega_j, omega_j.transpose() * e)
 }
 
 #[cfg(test)]

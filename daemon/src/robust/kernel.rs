@@ -9,8 +9,8 @@
 //! whose derivative is `s²`, which is what the polish compares when it
 //! accepts a step.
 
-use crate::geometry::Pose2;
-use crate::graph::{edge_error, Edge};
+use crate::graph::Edge;
+use crate::nonlinear::lie::LiePose;
 
 /// How a loop closure's switch follows its error.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -62,26 +62,26 @@ impl Kernel {
     }
 
     /// The switch `s ∈ [0, 1]` of `edge` at poses `xi`, `xj`.
-    pub fn switch(&self, edge: &Edge, xi: &Pose2, xj: &Pose2) -> f64 {
-        let e = edge_error(edge, xi, xj);
-        let chi2 = edge.information.mahalanobis(&e);
+    pub fn switch<P: LiePose>(&self, edge: &Edge<P>, xi: &P, xj: &P) -> f64 {
+        let e = P::edge_error(edge, xi, xj);
+        let chi2 = P::mahalanobis(&edge.information, &e);
         match *self {
             Kernel::Sc { xi } => sc(chi2, xi),
             Kernel::Dcs { phi } => dcs(chi2, phi),
-            Kernel::Asc => 1.0 / (chi2 * asc_scale(edge, &e) + 1.0),
+            Kernel::Asc => 1.0 / (chi2 * P::asc_scale(edge, xi, xj) + 1.0),
         }
     }
 
     /// The robust cost `ρ` of `edge` at poses `xi`, `xj`.
-    pub fn cost(&self, edge: &Edge, xi: &Pose2, xj: &Pose2) -> f64 {
-        let e = edge_error(edge, xi, xj);
-        let chi2 = edge.information.mahalanobis(&e);
+    pub fn cost<P: LiePose>(&self, edge: &Edge<P>, xi: &P, xj: &P) -> f64 {
+        let e = P::edge_error(edge, xi, xj);
+        let chi2 = P::mahalanobis(&edge.information, &e);
         match *self {
             Kernel::Sc { xi } => xi * chi2 / (xi + chi2),
             Kernel::Dcs { phi } if chi2 <= phi => chi2,
             Kernel::Dcs { phi } => phi * (3.0 * chi2 - phi) / (phi + chi2),
             Kernel::Asc => {
-                let w = 1.0 / asc_scale(edge, &e).max(f64::MIN_POSITIVE);
+                let w = 1.0 / P::asc_scale(edge, xi, xj).max(f64::MIN_POSITIVE);
                 w * chi2 / (w + chi2)
             }
         }
@@ -98,15 +98,10 @@ pub fn dcs(chi2: f64, phi: f64) -> f64 {
     (2.0 * phi / (phi + chi2)).min(1.0)
 }
 
-/// `χ′ |Λ|` of paper B: squared Euclidean error times det(covariance).
-fn asc_scale(edge: &Edge, e: &[f64; 3]) -> f64 {
-    let euclid = e[0] * e[0] + e[1] * e[1] + e[2] * e[2];
-    euclid * edge.information.covariance().determinant()
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::geometry::Pose2;
     use crate::graph::{EdgeKind, Information};
 
     fn edge(info: Information) -> Edge {

@@ -3,7 +3,7 @@
 
 use clap::Args;
 use slamd::graph::PoseGraph;
-use slamd::io::{self, OnInvalid, ReadError};
+use slamd::io::{self, AnyGraph, OnInvalid, ReadError};
 use std::path::Path;
 
 /// How many skipped lines a report names.
@@ -19,33 +19,55 @@ pub struct InputOpts {
 }
 
 /// A graph and the lines left out of it.
-pub struct Input {
-    pub graph: PoseGraph,
+pub struct Input<G = PoseGraph> {
+    pub graph: G,
     pub skipped: Vec<ReadError>,
+}
+
+/// How `opts` treat a line that would refuse the file.
+fn on_invalid(opts: InputOpts) -> OnInvalid {
+    if opts.skip_invalid {
+        OnInvalid::Skip
+    } else {
+        OnInvalid::Refuse
+    }
+}
+
+impl Input<AnyGraph> {
+    /// Reads `path`, 2-D or 3-D, as `opts` say; skipped lines are reported
+    /// on stderr unless `quiet`.
+    pub fn read_any(path: &Path, opts: InputOpts, quiet: bool) -> Result<Self, ReadError> {
+        let (graph, skipped) = io::read_any_graph_with(path, on_invalid(opts))?;
+        let input = Self { graph, skipped };
+        input.report(path, quiet);
+        Ok(input)
+    }
 }
 
 impl Input {
     /// Reads `path` as `opts` say; skipped lines are reported on stderr
     /// unless `quiet`.
     pub fn read(path: &Path, opts: InputOpts, quiet: bool) -> Result<Self, ReadError> {
-        let on_invalid = if opts.skip_invalid {
-            OnInvalid::Skip
-        } else {
-            OnInvalid::Refuse
-        };
-        let (graph, skipped) = io::read_graph_with(path, on_invalid)?;
+        let (graph, skipped) = io::read_graph_with(path, on_invalid(opts))?;
         let input = Self { graph, skipped };
-        if !quiet && !input.skipped.is_empty() {
+        input.report(path, quiet);
+        Ok(input)
+    }
+}
+
+impl<G> Input<G> {
+    /// Reports the skipped lines on stderr unless `quiet`.
+    fn report(&self, path: &Path, quiet: bool) {
+        if !quiet && !self.skipped.is_empty() {
             eprintln!(
                 "skipped {} invalid line(s) of {}:",
-                input.skipped.len(),
+                self.skipped.len(),
                 path.display()
             );
-            for line in input.named() {
+            for line in self.named() {
                 eprintln!("  {line}");
             }
         }
-        Ok(input)
     }
 
     /// The first skipped lines, as `file:line: reason`.

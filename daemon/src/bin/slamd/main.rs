@@ -10,6 +10,7 @@ mod replay;
 mod robust;
 mod run;
 mod solve;
+mod solve3;
 mod status;
 mod synth;
 mod telemetry;

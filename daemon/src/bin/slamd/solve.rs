@@ -11,7 +11,7 @@ use std::path::PathBuf;
 
 #[derive(Args, Debug)]
 pub struct SolveOpts {
-    /// Graph file: g2o (.g2o), TORO (.graph) or iSAM (.txt).
+    /// Graph file, 2-D or 3-D: g2o (.g2o), TORO or HOG-Man (.graph), iSAM (.txt).
     pub file: PathBuf,
     /// Linear formulation: two-stage, virtual-frame, virtual-frame-pivot, odometry.
     #[arg(long, default_value = "two-stage")]
@@ -46,9 +46,12 @@ pub struct SolveOpts {
 }
 
 pub fn run(opts: SolveOpts) -> anyhow::Result<()> {
-    let input = crate::input::Input::read(&opts.file, opts.input, opts.json)?;
+    let input = crate::input::Input::read_any(&opts.file, opts.input, opts.json)?;
     let skipped = input.json();
-    let mut graph = input.graph;
+    let mut graph = match input.graph {
+        io::AnyGraph::Planar(g) => g,
+        io::AnyGraph::Spatial(g) => return crate::solve3::run(&opts, &g, skipped),
+    };
     if opts.odometry_only {
         graph = odometry_only(&graph);
     }

@@ -1,0 +1,132 @@
+//! [`LiePose`]: what the polish needs of a pose type, so that one
+//! Levenberg–Marquardt and one Hessian layout serve SE(2) and SE(3).
+//!
+//! A pose owns `DOF` variables, a local perturbation `δ` around it: the
+//! additive `(x, y, θ)` in the plane, `X ⊞ δ = X · Exp(δ)` in space (see
+//! [`super::se3`]). Each edge contributes the `2·DOF`-square block
+//! `Jᵀ Ω J` and the gradient `Jᵀ Ω e` over the variables of its two poses;
+//! a position prior the `DOF`-square block of one pose.
+
+use super::{se2, se3};
+use crate::geometry::Pose2;
+use crate::graph::{Edge, EdgeCost, Pose3};
+use faer::c64;
+use nalgebra::{Matrix2, Matrix3, Matrix6, SMatrix, SVector, Vector2, Vector3, Vector6};
+use std::ops::{Index, MulAssign};
+
+/// A pose type the polish can linearise and step.
+pub trait LiePose: EdgeCost {
+    /// `Jᵀ Ω J` of one edge, `2·DOF` square (pose `i` first).
+    type EdgeHessian: Index<(usize, usize), Output = f64> + MulAssign<f64>;
+    /// `Jᵀ Ω e` of one edge, `2·DOF` long.
+    type EdgeGradient: Index<usize, Output = f64> + MulAssign<f64>;
+    /// `DOF` square, over one pose.
+    type PoseHessian: Index<(usize, usize), Output = f64>;
+    /// `DOF` long, over one pose.
+    type PoseGradient: Index<usize, Output = f64>;
+    /// A position in the map frame.
+    type Position: Copy + std::fmt::Debug + PartialEq + Send + Sync;
+    /// The information of a position.
+    type PositionInformation: Copy + std::fmt::Debug + PartialEq + Send + Sync;
+
+    /// `(Jᵀ Ω J, Jᵀ Ω e)` of `edge` at `xi`, `xj`.
+    fn edge_system(edge: &Edge<Self>, xi: &Self, xj: &Self) -> (Self::EdgeHessian, Self::EdgeGradient);
+
+    /// `self ⊞ δ`, with `delta` of length `DOF`.
+    fn retract(&self, delta: &[f64]) -> Self;
+
+    /// `(p − target)ᵀ Ω (p − target)` of the pose's position `p`.
+    fn prior_chi2(&self, target: &Self::Position, information: &Self::PositionInformation) -> f64;
+
+    /// `(Jᵀ Ω J, Jᵀ Ω e)` of the prior on the pose's position.
+    fn prior_system(
+        &self,
+        target: &Self::Position,
+        information: &Self::PositionInformation,
+    ) -> (Self::PoseHessian, Self::PoseGradient);
+
+    /// Paper B's `χ′ |Λ|`: the squared Euclidean error of `edge` times the
+    /// determinant of its covariance (the adaptive switch's scale).
+    fn asc_scale(edge: &Edge<Self>, xi: &Self, xj: &Self) -> f64;
+}
+
+impl LiePose for Pose2 {
+    type EdgeHessian = Matrix6<f64>;
+    type EdgeGradient = Vector6<f64>;
+    type PoseHessian = Matrix3<f64>;
+    type PoseGradient = Vector3<f64>;
+    type Position = c64;
+    type PositionInformation = Matrix2<f64>;
+
+    fn edge_system(edge: &Edge, xi: &Pose2, xj: &Pose2) -> (Matrix6<f64>, Vector6<f64>) {
+        se2::local_system(edge, xi, xj)
+    }
+
+    fn retract(&self, d: &[f64]) -> Pose2 {
+        Pose2::new(self.x + d[0], self.y + d[1], self.theta + d[2])
+    }
+
+    fn prior_chi2(&self, target: &c64, information: &Matrix2<f64>) -> f64 {
+        let e = self.position() - target;
+        let v = Vector2::new(e.re, e.im);
+        (v.transpose() * information * v)[0]
+    }
+
+    /// `J = [I₂ 0]` on `(x, y, θ)`.
+    fn prior_system(&self, target: &c64, information: &Matrix2<f64>) -> (Matrix3<f64>, Vector3<f64>) {
+        let e = self.position() - target;
+        let g = information * Vector2::new(e.re, e.im);
+        let mut h = Matrix3::zeros();
+        h.fixed_view_mut::<2, 2>(0, 0).copy_from(information);
+        (h, Vector3::new(g[0], g[1], 0.0))
+    }
+
+    fn asc_scale(edge: &Edge, xi: &Pose2, xj: &Pose2) -> f64 {
+        let e = crate::graph::edge_error(edge, xi, xj);
+        let euclid = e[0] * e[0] + e[1] * e[1] + e[2] * e[2];
+        euclid * edge.information.covariance().determinant()
+    }
+}
+
+impl LiePose for Pose3 {
+    type EdgeHessian = SMatrix<f64, 12, 12>;
+    type EdgeGradient = SVector<f64, 12>;
+    type PoseHessian = Matrix6<f64>;
+    type PoseGradient = Vector6<f64>;
+    type Position = Vector3<f64>;
+    type PositionInformation = Matrix3<f64>;
+
+    fn edge_system(edge: &Edge<Pose3>, xi: &Pose3, xj: &Pose3) -> (Self::EdgeHessian, Self::EdgeGradient) {
+        se3::local_system(edge, xi, xj)
+    }
+
+    fn retract(&self, d: &[f64]) -> Pose3 {
+        se3::retract(self, &Vector6::from_column_slice(d))
+    }
+
+    fn prior_chi2(&self, target: &Vector3<f64>, information: &Matrix3<f64>) -> f64 {
+        let e = self.translation - target;
+        e.dot(&(information * e))
+    }
+
+    /// `p ⊞ δ` moves the position by `R u`, so `J = [R 0]`.
+    fn prior_system(
+        &self,
+        target: &Vector3<f64>,
+        information: &Matrix3<f64>,
+    ) -> (Matrix6<f64>, Vector6<f64>) {
+        let r = self.rotation.to_rotation_matrix().into_inner();
+        let e = self.translation - target;
+        let mut h = Matrix6::zeros();
+        h.fixed_view_mut::<3, 3>(0, 0)
+            .copy_from(&(r.transpose() * information * r));
+        let g = r.transpose() * (information * e);
+        (h, Vector6::new(g.x, g.y, g.z, 0.0, 0.0, 0.0))
+    }
+
+    fn asc_scale(edge: &Edge<Pose3>, xi: &Pose3, xj: &Pose3) -> f64 {
+        let e = crate::graph::edge_error3(edge, xi, xj);
+        let euclid: f64 = e.iter().map(|v| v * v).sum();
+        euclid * edge.information.covariance().determinant()
+    }
+}
