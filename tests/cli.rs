@@ -210,3 +210,32 @@ fn a_kernel_parameter_out_of_range_is_refused_by_name() {
         assert!(err.contains(says), "{arg}: {err}");
     }
 }
+
+/// A 3-D file is detected and solved; the result written as g2o SE3 is
+/// read back by `slamd eval` to the same χ²; a 2-D-only command refuses
+/// it by name.
+#[test]
+fn solve_and_eval_read_3d_graphs_and_replay_refuses_them_clearly() {
+    let file = dataset("3d/smallgrid3d.g2o");
+    let file = file.to_str().expect("utf-8");
+    let out = std::env::temp_dir().join(format!("slamd-3d-{}.g2o", std::process::id()));
+    let out_s = out.to_str().expect("utf-8");
+    let v = run_json(&["solve", file, "--polish", "--json", "--out", out_s]);
+    assert_eq!(
+        (v["dimension"].as_str(), v["nodes"].as_u64(), v["edges"].as_u64()),
+        (Some("3d"), Some(125), Some(297))
+    );
+    let chi2 = v["chi2"].as_f64().expect("chi2");
+    // GTSAM's LM from its chordal initialisation scores 532.076 here
+    assert!(chi2 < 532.0 && chi2 > 500.0, "{chi2}");
+    let e = run_json(&["eval", file, out_s, "--json"]);
+    let _ = std::fs::remove_file(&out);
+    let scored = e["chi2"].as_f64().expect("chi2");
+    assert!((scored - chi2).abs() < 1e-6 * chi2, "{scored} vs {chi2}");
+    let (code, _, err) = run_slamd(&["replay", file, "--embedded"]);
+    assert_ne!(code, 0);
+    assert!(
+        err.contains("a 3-D pose graph; this command works on 2-D graphs"),
+        "{err}"
+    );
+}

@@ -6,7 +6,8 @@ use crate::graph::{chi2, Edge, EdgeKind, GraphError, Pose3, PoseGraph};
 use crate::linear::{chordal, two_stage, virtual_frame, Pivot};
 use crate::nonlinear::{polish, LevenbergMarquardtParams, LiePose, LmReport, Problem};
 use crate::outliers::consistency::ConsistencyGraph;
-use crate::outliers::{robust_polish, OutlierConfig, RobustEdges};
+use crate::outliers::{cycles, robust_polish, OutlierConfig, RobustEdges};
+use crate::robust::Kernel;
 use crate::sparse::FactorError;
 use std::fmt;
 use std::str::FromStr;
@@ -202,6 +203,10 @@ pub fn solve_batch(graph: &PoseGraph, options: &BatchOptions) -> Result<BatchSol
         } else {
             Vec::new()
         };
+        let held_out = cycles::either(
+            held_out,
+            cycles::rejected(graph.len(), graph.edges(), &switchable, filter),
+        );
         let input = RobustEdges {
             edges: graph.edges(),
             switchable: &switchable,
@@ -258,7 +263,9 @@ pub fn solve_batch(graph: &PoseGraph, options: &BatchOptions) -> Result<BatchSol
 }
 
 /// Solves a whole 3-D graph at once: the chordal two-stage initialiser
-/// (or odometry), then optionally the polish on g2o's SE(3) cost.
+/// (or odometry), then optionally the polish on g2o's SE(3) cost, or the
+/// robust polish (DCS at six degrees of freedom unless the kernel is
+/// set; from the initialiser and from odometry alone).
 pub fn solve_batch3(
     graph: &PoseGraph<Pose3>,
     options: &BatchOptions,
@@ -266,9 +273,6 @@ pub fn solve_batch3(
     graph.check_connected()?;
     if options.gps.is_some() {
         return Err(SolveError::Unsupported("GPS"));
-    }
-    if options.robust.is_some() {
-        return Err(SolveError::Unsupported("the robust polish"));
     }
     let start = Instant::now();
     let poses = match options.formulation {
@@ -281,12 +285,35 @@ pub fn solve_batch3(
     let linear_seconds = start.elapsed().as_secs_f64();
     let linear_chi2 = chi2(graph, &poses);
     let start = Instant::now();
-    let report = match options.polish {
-        true => Some(polish(Problem::edges(graph.edges()), poses.clone(), options.lm)?),
-        false => None,
+    let (mut report, mut switches) = (None, None);
+    let poses = if let Some(filter) = &options.robust {
+        if filter.enabled && (filter.cycles || filter.pairwise) {
+            return Err(SolveError::Unsupported("the cycle test and PCM"));
+        }
+        let mut filter = *filter;
+        if filter.kernel == Kernel::default() {
+            filter.kernel = Kernel::default_for(6);
+        }
+        let switchable: Vec<bool> = graph.edges().iter().map(|e| filter.switchable(e)).collect();
+        let mut starts = vec![poses];
+        starts.extend(odometry_chain(graph));
+        let input = RobustEdges {
+            edges: graph.edges(),
+            switchable: &switchable,
+            held_out: &[],
+        };
+        let sol = robust_polish(input, starts, &filter, options.lm, 2, None)?;
+        switches = Some(sol.switches);
+        sol.poses
+    } else if options.polish {
+        let r = polish(Problem::edges(graph.edges()), poses, options.lm)?;
+        let poses = r.poses.clone();
+        report = Some(r);
+        poses
+    } else {
+        poses
     };
     let polish_seconds = start.elapsed().as_secs_f64();
-    let poses = report.as_ref().map_or(poses, |r| r.poses.clone());
     Ok(BatchSolution {
         chi2: chi2(graph, &poses),
         poses,
@@ -297,12 +324,12 @@ pub fn solve_batch3(
         rho: None,
         median_axis_length: None,
         georef: None,
-        switches: None,
+        switches,
     })
 }
 
 /// Poses composed along odometry alone, when odometry links every keyframe.
-fn odometry_chain(graph: &PoseGraph) -> Option<Vec<Pose2>> {
+fn odometry_chain<P: LiePose>(graph: &PoseGraph<P>) -> Option<Vec<P>> {
     let odometry = graph.edges().iter().filter(|e| e.kind == EdgeKind::Odometry);
     let chain = PoseGraph::from_parts(graph.keyframes().to_vec(), odometry.copied().collect()).ok()?;
     chain.compose_spanning_tree().ok()

@@ -11,6 +11,7 @@ use crate::graph::{chi2_of_edges, Edge, PoseGraph};
 use crate::linear::two_stage;
 use crate::nonlinear::{LevenbergMarquardtParams, PositionPrior};
 use crate::outliers::consistency::ConsistencyGraph;
+use crate::outliers::cycles;
 use crate::outliers::{robust_polish, OutlierConfig, RobustEdges, OFF_BELOW, REJECTED_BELOW};
 use std::collections::HashMap;
 use std::sync::atomic::AtomicBool;
@@ -164,8 +165,11 @@ impl Model {
             .iter()
             .map(|&e| filter.switchable(&self.graph.edges()[e]))
             .collect();
-        let held_out = self.held_out(filter, &ids, &switchable);
         let initial: Vec<Pose2> = joined.iter().map(|&k| lin[k]).collect();
+        let held_out = cycles::either(
+            self.held_out(filter, &ids, &switchable),
+            cycles::rejected(initial.len(), &edges, &switchable, filter),
+        );
         let starts = self.starts(config, compact, joined, &initial, &ids, polish);
         let threads = if matches!(polish, Polish::FullInline | Polish::Closing) {
             2

@@ -201,6 +201,30 @@ fn key(a: usize, b: usize) -> (usize, usize) {
     (a.min(b), a.max(b))
 }
 
+/// The switchable edges paper A's cycle test rejects when `config` asks
+/// for it (over keyframes `0..n`), else none: a held-out mask for
+/// [`super::robust_polish`].
+pub fn rejected(n: usize, edges: &[Edge], switchable: &[bool], config: &super::OutlierConfig) -> Vec<bool> {
+    if !(config.enabled && config.cycles) {
+        return Vec::new();
+    }
+    let usable = vec![true; edges.len()];
+    let check = CycleCheck::new(n, edges, &usable);
+    (0..edges.len())
+        .map(|a| switchable[a] && check.verdict(a, &config.cycle) == Verdict::Reject)
+        .collect()
+}
+
+/// Both held-out masks at once: an edge is held out if either holds it
+/// out (a shorter mask holds out none past its end).
+pub fn either(a: Vec<bool>, b: Vec<bool>) -> Vec<bool> {
+    let (mut long, short) = if a.len() >= b.len() { (a, b) } else { (b, a) };
+    for (l, s) in long.iter_mut().zip(short) {
+        *l |= s;
+    }
+    long
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -152,7 +152,7 @@ impl OutlierConfig {
 
     /// Whether `edge` gets a switch: every edge but odometry and trusted
     /// loop closures, when enabled.
-    pub fn switchable(&self, edge: &Edge) -> bool {
+    pub fn switchable<P: crate::graph::RigidMotion>(&self, edge: &Edge<P>) -> bool {
         self.enabled && !matches!(edge.kind, EdgeKind::Odometry | EdgeKind::TrustedLoopClosure)
     }
 }

@@ -1,21 +1,21 @@
 //! [`robust_polish`]: the polish that switches wrong loop closures off,
 //! shared by the engine's re-solve and `slamd solve --robust`.
 
-use super::{CycleCheck, OutlierConfig, Verdict};
+use super::OutlierConfig;
 use crate::geometry::Pose2;
 use crate::graph::Edge;
-use crate::nonlinear::{polish, LevenbergMarquardtParams, LmReport, Problem, Robust};
+use crate::nonlinear::{polish, LevenbergMarquardtParams, LiePose, LmReport, Problem, Robust};
 use crate::sparse::FactorError;
 use std::sync::atomic::AtomicBool;
 use std::sync::{Mutex, OnceLock};
 
 /// What the robust polish found.
 #[derive(Clone, Debug)]
-pub struct RobustSolution {
+pub struct RobustSolution<P = Pose2> {
     /// The poses.
-    pub poses: Vec<Pose2>,
+    pub poses: Vec<P>,
     /// The switch `s ∈ [0, 1]` of each edge (1 where not switchable, 0 where
-    /// the cycle test rejected it or PCM held it out).
+    /// it was held out: PCM's or the cycle test's verdict).
     pub switches: Vec<f64>,
     /// The robust cost at `poses`.
     pub cost: f64,
@@ -23,13 +23,14 @@ pub struct RobustSolution {
 
 /// The edges of a [`robust_polish`] and what it may do with each.
 #[derive(Clone, Copy, Debug)]
-pub struct RobustEdges<'a> {
+pub struct RobustEdges<'a, P: LiePose = Pose2> {
     /// The edges.
-    pub edges: &'a [Edge],
+    pub edges: &'a [Edge<P>],
     /// Whether each edge gets a switch.
     pub switchable: &'a [bool],
-    /// Edges held out before the polish, at switch 0 (PCM's verdict); a
-    /// shorter slice holds out none past its end.
+    /// Edges held out before the polish, at switch 0 (the verdict of PCM
+    /// or of the cycle test, [`super::cycles::rejected`]); a shorter slice
+    /// holds out none past its end.
     pub held_out: &'a [bool],
 }
 
@@ -67,11 +68,11 @@ const WAKE_ROUNDS: usize = 3;
 /// the current poses) left out of the linear systems; repeated while the
 /// result wakes any of them. The report's costs are the whole problem's.
 /// Falls back to the whole problem if the rest cannot be factorised.
-fn polish_awake(
-    problem: Problem<'_>,
-    start: Vec<Pose2>,
+fn polish_awake<P: LiePose>(
+    problem: Problem<'_, P>,
+    start: Vec<P>,
     params: LevenbergMarquardtParams,
-) -> Result<LmReport, FactorError> {
+) -> Result<LmReport<P>, FactorError> {
     let Some(robust) = problem.robust else {
         return polish(problem, start, params);
     };
@@ -85,7 +86,7 @@ fn polish_awake(
             break;
         }
         let index: Vec<usize> = (0..awake.len()).filter(|&a| awake[a]).collect();
-        let edges: Vec<Edge> = index.iter().map(|&a| problem.edges[a]).collect();
+        let edges: Vec<Edge<P>> = index.iter().map(|&a| problem.edges[a]).collect();
         let switchable: Vec<bool> = index.iter().map(|&a| robust.switchable[a]).collect();
         let sub = Problem {
             edges: &edges,
@@ -139,7 +140,7 @@ fn polish_awake(
 
 /// Wakes the edges that are not switchable or whose switch at `poses` is
 /// at least [`DORMANT_BELOW`]; returns how many woke.
-fn wake(edges: &[Edge], robust: &Robust<'_>, poses: &[Pose2], awake: &mut [bool]) -> usize {
+fn wake<P: LiePose>(edges: &[Edge<P>], robust: &Robust<'_>, poses: &[P], awake: &mut [bool]) -> usize {
     let mut woke = 0;
     for (a, e) in edges.iter().enumerate() {
         if !awake[a]
@@ -158,12 +159,12 @@ fn wake(edges: &[Edge], robust: &Robust<'_>, poses: &[Pose2], awake: &mut [bool]
 /// times `lowest()` (the lowest cost probed before it; `None`: the first
 /// start). `lowest` is asked only at that check, so a start can be probed
 /// while the ones before it still run.
-fn probe_start(
-    problem: Problem<'_>,
-    start: Vec<Pose2>,
+fn probe_start<P: LiePose>(
+    problem: Problem<'_, P>,
+    start: Vec<P>,
     probe: LevenbergMarquardtParams,
     lowest: Option<&dyn Fn() -> f64>,
-) -> Result<LmReport, FactorError> {
+) -> Result<LmReport<P>, FactorError> {
     let Some(lowest) = lowest.filter(|_| probe.max_iterations > LOOK_ITERATIONS) else {
         return polish_awake(problem, start, probe);
     };
@@ -194,17 +195,17 @@ fn probe_start(
 /// [`probe_start`] on every start, `threads` at a time; start `i`'s look
 /// check waits for the probes of the starts before it, so the outcome is
 /// the same as one at a time.
-fn probe_starts(
-    problem: Problem<'_>,
-    starts: Vec<Vec<Pose2>>,
+fn probe_starts<P: LiePose>(
+    problem: Problem<'_, P>,
+    starts: Vec<Vec<P>>,
     probe: LevenbergMarquardtParams,
     threads: usize,
-) -> Vec<Result<LmReport, FactorError>> {
+) -> Vec<Result<LmReport<P>, FactorError>> {
     let n = starts.len();
     // the cost each probe ended at (infinite when it failed)
     let costs: Vec<OnceLock<f64>> = (0..n).map(|_| OnceLock::new()).collect();
     let lowest_before = |i: usize| (0..i).map(|j| *costs[j].wait()).fold(f64::INFINITY, f64::min);
-    let run = |i: usize, start: Vec<Pose2>| {
+    let run = |i: usize, start: Vec<P>| {
         // a probe that panics still lets the ones waiting on it go on
         let _unblock = Unblock(&costs[i]);
         let lowest = || lowest_before(i);
@@ -251,9 +252,9 @@ impl Drop for Unblock<'_> {
     }
 }
 
-/// The edges `input` holds out (PCM's verdict, [`super::consistency`])
-/// and those paper A's cycle test (when configured) rejects are switched
-/// off; Levenberg–Marquardt then minimises the kernel's robust cost, each
+/// The edges `input` holds out (the verdict of PCM,
+/// [`super::consistency`], or of paper A's cycle test) are switched off;
+/// Levenberg–Marquardt then minimises the kernel's robust cost, each
 /// switchable edge reweighted by `s²` at every iteration (edges dormant at a
 /// start sit out until they wake: [`DORMANT_BELOW`]), from every start
 /// for [`PROBE_ITERATIONS`] (a start far above the ones before it, for
@@ -262,33 +263,25 @@ impl Drop for Unblock<'_> {
 /// gives the switches. The starts are probed `threads` at a time, with
 /// the same outcome. Once `stop` is set, every polish ends where it is.
 /// Fails when no start could be polished (or none was given).
-pub fn robust_polish(
-    input: RobustEdges<'_>,
-    starts: Vec<Vec<Pose2>>,
+pub fn robust_polish<P: LiePose>(
+    input: RobustEdges<'_, P>,
+    starts: Vec<Vec<P>>,
     config: &OutlierConfig,
     params: LevenbergMarquardtParams,
     threads: usize,
     stop: Option<&AtomicBool>,
-) -> Result<RobustSolution, FactorError> {
+) -> Result<RobustSolution<P>, FactorError> {
     let RobustEdges {
         edges,
         switchable,
         held_out,
     } = input;
-    let n = starts.first().map_or(0, Vec::len);
     let mut out = vec![false; edges.len()];
-    if config.enabled && config.cycles {
-        let usable = vec![true; edges.len()];
-        let check = CycleCheck::new(n, edges, &usable);
-        for (a, o) in out.iter_mut().enumerate() {
-            *o = switchable[a] && check.verdict(a, &config.cycle) == Verdict::Reject;
-        }
-    }
     for (o, &h) in out.iter_mut().zip(held_out) {
         *o |= h;
     }
     let kept: Vec<usize> = (0..edges.len()).filter(|&a| !out[a]).collect();
-    let kept_edges: Vec<Edge> = kept.iter().map(|&a| edges[a]).collect();
+    let kept_edges: Vec<Edge<P>> = kept.iter().map(|&a| edges[a]).collect();
     let kept_switchable: Vec<bool> = kept.iter().map(|&a| switchable[a]).collect();
     let problem = Problem {
         edges: &kept_edges,
@@ -308,7 +301,7 @@ pub fn robust_polish(
         ..params
     };
     let mut error = FactorError::NotPositiveDefinite { step: 0 };
-    let mut probed: Vec<LmReport> = Vec::new();
+    let mut probed: Vec<LmReport<P>> = Vec::new();
     for r in probe_starts(problem, starts, probe, threads) {
         match r {
             Ok(r) => probed.push(r),
@@ -316,7 +309,7 @@ pub fn robust_polish(
         }
     }
     let lowest = probed.iter().map(|r| r.final_chi2).fold(f64::INFINITY, f64::min);
-    let mut best: Option<LmReport> = None;
+    let mut best: Option<LmReport<P>> = None;
     for r in probed {
         let spent = r.iterations.len() >= params.max_iterations;
         let r = if r.converged || spent || problem.stopped() || r.final_chi2 > PRUNE_RATIO * lowest {

@@ -44,6 +44,23 @@ pub enum Kernel {
 /// calibrated synthetic world).
 pub const DEFAULT_PHI: f64 = 16.27 / 3.0;
 
+/// DCS's default Φ for a 3-D edge: the same rule at six degrees of
+/// freedom, `χ²₆(0.999) / 3 = 22.458 / 3`.
+pub const DEFAULT_PHI_6DOF: f64 = 22.458 / 3.0;
+
+impl Kernel {
+    /// The default kernel for edges of `dof` degrees of freedom (DCS with
+    /// [`DEFAULT_PHI`] or [`DEFAULT_PHI_6DOF`]).
+    pub fn default_for(dof: usize) -> Self {
+        match dof {
+            6 => Kernel::Dcs {
+                phi: DEFAULT_PHI_6DOF,
+            },
+            _ => Kernel::default(),
+        }
+    }
+}
+
 impl Default for Kernel {
     fn default() -> Self {
         Kernel::Dcs { phi: DEFAULT_PHI }

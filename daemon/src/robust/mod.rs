@@ -11,4 +11,4 @@
 
 pub mod kernel;
 
-pub use kernel::{Kernel, DEFAULT_PHI};
+pub use kernel::{Kernel, DEFAULT_PHI, DEFAULT_PHI_6DOF};

@@ -2,7 +2,7 @@
 //! both print.
 
 use clap::Args;
-use slamd::graph::{EdgeKind, PoseGraph};
+use slamd::graph::{EdgeKind, PoseGraph, RigidMotion};
 use slamd::outliers::{OutlierConfig, REJECTED_BELOW};
 use slamd::robust::{Kernel, DEFAULT_PHI};
 
@@ -64,7 +64,7 @@ pub struct Rejected {
 }
 
 impl Rejected {
-    pub fn of(graph: &PoseGraph, switches: Option<&[f64]>) -> Rejected {
+    pub fn of<P: RigidMotion>(graph: &PoseGraph<P>, switches: Option<&[f64]>) -> Rejected {
         let loop_closures = graph
             .edges()
             .iter()

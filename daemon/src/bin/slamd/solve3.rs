@@ -7,14 +7,12 @@ use slamd::eval::{aligned_onto, ate3};
 use slamd::geometry::Pose2;
 use slamd::graph::{Pose3, PoseGraph};
 use slamd::io::{self, svg};
+use slamd::outliers::OutlierConfig;
 use slamd::solver::{solve_batch3, BatchOptions};
 
 pub fn run(opts: &SolveOpts, graph: &PoseGraph<Pose3>, skipped: serde_json::Value) -> anyhow::Result<()> {
     if opts.gps.gps.is_some() {
         bail!("--gps is not available for 3-D graphs");
-    }
-    if opts.robust {
-        bail!("--robust is not available for 3-D graphs");
     }
     if opts.odometry_only {
         bail!("--odometry-only is not available for 3-D graphs");
@@ -27,6 +25,7 @@ pub fn run(opts: &SolveOpts, graph: &PoseGraph<Pose3>, skipped: serde_json::Valu
     let options = BatchOptions {
         formulation: opts.formulation,
         polish: opts.polish,
+        robust: opts.robust.then(|| opts.filter.apply(OutlierConfig::default())),
         ..Default::default()
     };
     let sol = solve_batch3(graph, &options).with_context(|| format!("solving {}", opts.file.display()))?;
@@ -47,6 +46,7 @@ pub fn run(opts: &SolveOpts, graph: &PoseGraph<Pose3>, skipped: serde_json::Valu
         plot_top_view(plot, opts, graph, &sol.poses, truth.as_ref())?;
     }
     let iterations = sol.polish.as_ref().map(|r| r.iterations.len());
+    let robust = crate::robust::Rejected::of(graph, sol.switches.as_deref());
     if opts.json {
         let v = serde_json::json!({
             "file": opts.file.display().to_string(),
@@ -62,6 +62,9 @@ pub fn run(opts: &SolveOpts, graph: &PoseGraph<Pose3>, skipped: serde_json::Valu
             "linear_seconds": sol.linear_seconds,
             "polish_seconds": sol.polish_seconds,
             "iterations": iterations,
+            "robust": opts.robust,
+            "loop_closures": robust.loop_closures,
+            "rejected_edges": sol.switches.as_ref().map(|_| &robust.rejected),
             "skipped_lines": skipped,
         });
         println!("{v}");
@@ -84,6 +87,13 @@ pub fn run(opts: &SolveOpts, graph: &PoseGraph<Pose3>, skipped: serde_json::Valu
             );
         }
         println!("chi2           {:.3}", sol.chi2);
+        if sol.switches.is_some() {
+            println!(
+                "loop closures  {} ({} switched off)",
+                robust.loop_closures,
+                robust.rejected.len()
+            );
+        }
         if let Some(a) = ate {
             println!("ate            {:.4} m  over {} keyframes", a.rmse, a.matched);
         }
