@@ -1,6 +1,6 @@
 //! What a frontend hands slamd: keyframe ids, edges and GPS fixes.
 
-use crate::{Geodetic, Information, Pose2};
+use crate::{Geodetic, Pose2, RigidMotion};
 
 /// A keyframe's id, chosen by the frontend (unique per map).
 pub type KeyframeId = u64;
@@ -37,27 +37,29 @@ impl EdgeKind {
 }
 
 /// An edge as a frontend gives it: keyframe ids, `T_ij`, Ω and its kind.
+/// `P` is the pose type: [`Pose2`] (the default) or
+/// [`Pose3`](crate::Pose3).
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct EdgeInput {
+pub struct EdgeInput<P: RigidMotion = Pose2> {
     /// Keyframe `i`.
     pub from: KeyframeId,
     /// Keyframe `j`.
     pub to: KeyframeId,
     /// `T_ij`: `j` seen from `i`.
-    pub measurement: Pose2,
-    /// Ω over `(x, y, θ)`.
-    pub information: Information,
+    pub measurement: P,
+    /// Ω over the edge's error (`(x, y, θ)` in the plane).
+    pub information: P::Information,
     /// What produced it.
     pub kind: EdgeKind,
 }
 
-impl EdgeInput {
+impl<P: RigidMotion> EdgeInput<P> {
     /// Bundles the fields.
     pub fn new(
         from: KeyframeId,
         to: KeyframeId,
-        measurement: Pose2,
-        information: Information,
+        measurement: P,
+        information: P::Information,
         kind: EdgeKind,
     ) -> Self {
         Self {

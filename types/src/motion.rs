@@ -4,6 +4,32 @@
 use crate::{Information, Information6, Pose2, Pose3};
 use std::fmt::Debug;
 
+/// What every information matrix offers, whatever its size.
+pub trait InformationMatrix: Copy + PartialEq + Debug + Send + Sync + 'static {
+    /// Ω scaled by `s ≥ 0` (a weight or a switch's `s²`).
+    fn scaled(&self, s: f64) -> Self;
+    /// Whether every entry is 0 (an edge weighted out).
+    fn is_zero(&self) -> bool;
+}
+
+impl InformationMatrix for Information {
+    fn scaled(&self, s: f64) -> Self {
+        Information::scaled(self, s)
+    }
+    fn is_zero(&self) -> bool {
+        self.upper() == [0.0; 6]
+    }
+}
+
+impl InformationMatrix for Information6 {
+    fn scaled(&self, s: f64) -> Self {
+        Information6::scaled(self, s)
+    }
+    fn is_zero(&self) -> bool {
+        self.upper() == [0.0; 21]
+    }
+}
+
 /// A rigid motion group, SE(2) or SE(3), with the information matrix of a
 /// measurement on it.
 pub trait RigidMotion: Copy + PartialEq + Debug + Default + Send + Sync + 'static {
@@ -12,7 +38,7 @@ pub trait RigidMotion: Copy + PartialEq + Debug + Default + Send + Sync + 'stati
     /// The identity.
     const IDENTITY: Self;
     /// Ω over the edge error (`DOF × DOF`).
-    type Information: Copy + PartialEq + Debug + Send + Sync + 'static;
+    type Information: InformationMatrix;
     /// `self ∘ other`.
     fn compose(&self, other: &Self) -> Self;
     /// `self⁻¹`.
