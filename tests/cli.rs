@@ -212,10 +212,10 @@ fn a_kernel_parameter_out_of_range_is_refused_by_name() {
 }
 
 /// A 3-D file is detected and solved; the result written as g2o SE3 is
-/// read back by `slamd eval` to the same χ²; a 2-D-only command refuses
-/// it by name.
+/// read back by `slamd eval` to the same χ²; the embedded replay streams
+/// it to the same optimum, and the daemon path refuses it by name.
 #[test]
-fn solve_and_eval_read_3d_graphs_and_replay_refuses_them_clearly() {
+fn solve_eval_and_replay_read_3d_graphs() {
     let file = dataset("3d/smallgrid3d.g2o");
     let file = file.to_str().expect("utf-8");
     let out = std::env::temp_dir().join(format!("slamd-3d-{}.g2o", std::process::id()));
@@ -232,10 +232,14 @@ fn solve_and_eval_read_3d_graphs_and_replay_refuses_them_clearly() {
     let _ = std::fs::remove_file(&out);
     let scored = e["chi2"].as_f64().expect("chi2");
     assert!((scored - chi2).abs() < 1e-6 * chi2, "{scored} vs {chi2}");
-    let (code, _, err) = run_slamd(&["replay", file, "--embedded"]);
+    let r = run_json(&["replay", file, "--embedded", "--json", "--no-filter"]);
+    assert_eq!(r["dimension"].as_str(), Some("3d"));
+    let streamed = r["chi2"].as_f64().expect("chi2");
+    assert!((streamed - chi2).abs() < 1e-6 * chi2, "{streamed} vs {chi2}");
+    let (code, _, err) = run_slamd(&["replay", file]);
     assert_ne!(code, 0);
     assert!(
-        err.contains("a 3-D pose graph; this command works on 2-D graphs"),
+        err.contains("the daemon serves 2-D graphs; replay a 3-D graph with --embedded"),
         "{err}"
     );
 }

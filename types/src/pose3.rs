@@ -94,11 +94,15 @@ impl Pose3 {
         self.rotation.to_rotation_matrix()
     }
 
-    /// `self ∘ other`: `(R₁R₂, R₁t₂ + t₁)`.
+    /// `self ∘ other`: `(R₁R₂, R₁t₂ + t₁)`. The product quaternion is
+    /// normalised: without it the rounding of a long chain of compositions
+    /// (a map re-anchored through thousands of relative poses) lets the norm
+    /// drift away from 1, and every pose composed with it inherits the
+    /// drift.
     pub fn compose(&self, other: &Pose3) -> Pose3 {
         Pose3 {
             translation: self.rotation * other.translation + self.translation,
-            rotation: self.rotation * other.rotation,
+            rotation: UnitQuaternion::new_normalize(self.rotation.into_inner() * other.rotation.into_inner()),
         }
     }
 

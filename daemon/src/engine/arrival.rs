@@ -13,6 +13,7 @@
 //! well. A run reaching `drift_run` means the map drifted
 //! ([`ArrivalGate::take_drifted`]).
 
+use super::pose::EnginePose;
 use crate::geometry::Pose2;
 use crate::graph::Edge;
 use crate::outliers::{DriftRun, OutlierConfig, OFF_BELOW};
@@ -30,13 +31,13 @@ pub enum Verdict {
 /// The filter's settings at arrival, the current run of agreeing
 /// rejections, and whether a run said the map drifted.
 #[derive(Clone, Debug)]
-pub struct ArrivalGate {
+pub struct ArrivalGate<P: EnginePose = Pose2> {
     outliers: OutlierConfig,
-    drift: DriftRun,
+    drift: DriftRun<P>,
     drifted: bool,
 }
 
-impl ArrivalGate {
+impl<P: EnginePose> ArrivalGate<P> {
     /// A gate with the filter's settings and no run.
     pub fn new(outliers: OutlierConfig) -> Self {
         Self {
@@ -47,12 +48,12 @@ impl ArrivalGate {
     }
 
     /// Whether `edge` gets a switch at all (not odometry; filter on).
-    pub fn switchable(&self, edge: &Edge) -> bool {
+    pub fn switchable(&self, edge: &Edge<P>) -> bool {
         self.outliers.switchable(edge)
     }
 
     /// DCS's switch of `edge` at the estimate's `xi`, `xj`.
-    pub fn switch(&self, edge: &Edge, xi: &Pose2, xj: &Pose2) -> f64 {
+    pub fn switch(&self, edge: &Edge<P>, xi: &P, xj: &P) -> f64 {
         self.outliers.arrival_switch(edge, xi, xj)
     }
 
@@ -75,7 +76,7 @@ impl ArrivalGate {
 
     /// Records that loop closure `e`, `edge`, would be switched off at
     /// the estimate's `xi`, `xj`, `vouched` for or not, and decides.
-    pub fn rejected(&mut self, e: usize, vouched: bool, edge: &Edge, xi: &Pose2, xj: &Pose2) -> Verdict {
+    pub fn rejected(&mut self, e: usize, vouched: bool, edge: &Edge<P>, xi: &P, xj: &P) -> Verdict {
         let run = self.outliers.drift_run;
         let len = self
             .drift

@@ -7,20 +7,24 @@
 //! job finishes, [`catch_up`] replays the ops it had not applied onto its
 //! fresh state, which then replaces the foreground's.
 
+use super::pose::EnginePose;
 use super::report::FactorWork;
 use super::resolve::{self, Job, Outcome};
 use super::state::{Op, State};
 use super::{EngineConfig, Polish};
+use crate::geometry::Pose2;
+
+/// The ops applied while a job ran, numbered.
+pub type Log<P> = Vec<(u64, Op<P>)>;
 use crate::sparse::FactorError;
 use std::time::Instant;
 
 /// The running job, if any, and the ops applied since it started.
-#[derive(Default)]
-pub struct Background {
-    job: Option<Job>,
+pub struct Background<P: EnginePose = Pose2> {
+    job: Option<Job<P>>,
     /// Called when a job's outcome is ready.
     waker: Option<resolve::Waker>,
-    log: Vec<(u64, Op)>,
+    log: Log<P>,
     /// The next op's number.
     seq: u64,
     /// Keyframes below this index are known to the running job's hints
@@ -28,7 +32,19 @@ pub struct Background {
     hinted: usize,
 }
 
-impl Background {
+impl<P: EnginePose> Default for Background<P> {
+    fn default() -> Self {
+        Self {
+            job: None,
+            waker: None,
+            log: Vec::new(),
+            seq: 0,
+            hinted: 0,
+        }
+    }
+}
+
+impl<P: EnginePose> Background<P> {
     /// Calls `waker` (on the job's thread) whenever a job's outcome is
     /// ready.
     pub fn wake_with(&mut self, waker: resolve::Waker) {
@@ -42,7 +58,7 @@ impl Background {
 
     /// Numbers `op`, applied in the foreground, and forwards it to the
     /// running job.
-    pub fn record(&mut self, op: Op) {
+    pub fn record(&mut self, op: Op<P>) {
         if let Some(job) = &self.job {
             job.forward(self.seq, op.clone());
             self.log.push((self.seq, op));
@@ -52,7 +68,7 @@ impl Background {
 
     /// Forwards `state`'s estimates of the keyframes added since the last
     /// call (those that joined) to the running job.
-    pub fn forward_estimates(&mut self, state: &State) {
+    pub fn forward_estimates(&mut self, state: &State<P>) {
         let Some(job) = &self.job else {
             return;
         };
@@ -65,7 +81,7 @@ impl Background {
     }
 
     /// Starts a job on `state`'s model and estimate.
-    pub fn start(&mut self, state: &State, config: &EngineConfig, polish: Polish) {
+    pub fn start(&mut self, state: &State<P>, config: &EngineConfig, polish: Polish) {
         let (model, estimate) = (state.model().clone(), state.estimate().to_vec());
         self.log.clear();
         self.hinted = state.model.graph.len();
@@ -74,7 +90,7 @@ impl Background {
     }
 
     /// The finished job's outcome and the ops applied since it started.
-    pub fn poll(&mut self) -> Option<(Outcome, Vec<(u64, Op)>)> {
+    pub fn poll(&mut self) -> Option<(Outcome<P>, Log<P>)> {
         let outcome = self.job.as_mut()?.try_finish()?;
         self.job = None;
         Some((outcome, std::mem::take(&mut self.log)))
@@ -90,7 +106,7 @@ impl Background {
     }
 }
 
-impl Drop for Background {
+impl<P: EnginePose> Drop for Background<P> {
     fn drop(&mut self) {
         if let Some(job) = self.job.take() {
             job.stop();
@@ -100,7 +116,11 @@ impl Drop for Background {
 
 /// Runs a job inline on `state`'s model and estimate (no background
 /// thread).
-pub fn run_inline(state: &State, config: &EngineConfig, polish: Polish) -> Option<Outcome> {
+pub fn run_inline<P: EnginePose>(
+    state: &State<P>,
+    config: &EngineConfig,
+    polish: Polish,
+) -> Option<Outcome<P>> {
     let (model, estimate) = (state.model().clone(), state.estimate());
     let (_tx, rx) = crossbeam::channel::unbounded();
     let never = std::sync::atomic::AtomicBool::new(false);
@@ -112,13 +132,13 @@ pub fn run_inline(state: &State, config: &EngineConfig, polish: Polish) -> Optio
 /// solves put them. Returns it with its work counters as they stood before
 /// the catch-up (the catch-up is this thread's work), or `None` when the
 /// job failed or an op cannot be replayed (the foreground keeps its state).
-pub fn catch_up(
-    state: Result<State, FactorError>,
+pub fn catch_up<P: EnginePose>(
+    state: Result<State<P>, FactorError>,
     last_seq: Option<u64>,
-    log: Vec<(u64, Op)>,
-    foreground: &State,
+    log: Log<P>,
+    foreground: &State<P>,
     config: &EngineConfig,
-) -> Option<(State, FactorWork)> {
+) -> Option<(State<P>, FactorWork)> {
     let Ok(mut state) = state else {
         tracing::warn!("Re-solve failed; keeping the current factor.");
         return None;

@@ -7,8 +7,8 @@
 //! also clears the running sum's round-off.
 
 use super::model::Model;
-use crate::geometry::{Pose2, Turns};
-use crate::graph::{edge_error_turned, Edge};
+use super::pose::EnginePose;
+use crate::geometry::Turns;
 
 /// Per-edge χ² at the estimate and their sum.
 #[derive(Clone, Debug, Default)]
@@ -28,7 +28,7 @@ pub struct Chi2Cache {
 
 impl Chi2Cache {
     /// The cache over `model`'s edges at `estimate`, computed.
-    pub fn new(model: &Model, estimate: &[Pose2]) -> Self {
+    pub fn new<P: EnginePose>(model: &Model<P>, estimate: &[P]) -> Self {
         let edges = model.graph.edges().len();
         let mut cache = Self {
             per_edge: vec![0.0; edges],
@@ -50,16 +50,17 @@ impl Chi2Cache {
     }
 
     /// Recomputes edge `e`'s term at `estimate`.
-    pub fn refresh(&mut self, model: &Model, e: usize, estimate: &[Pose2]) {
+    pub fn refresh<P: EnginePose>(&mut self, model: &Model<P>, e: usize, estimate: &[P]) {
         let edge = &model.graph.edges()[e];
-        let v = model.weight(e) * self.turned_chi2(e, edge, estimate);
+        let v =
+            model.weight(e) * P::cached_chi2(&mut self.turns, &mut self.measured_turns, e, edge, estimate);
         self.total += v - self.per_edge[e];
         self.per_edge[e] = v;
     }
 
     /// Refreshes the terms of every applied edge incident to the `moved`
     /// keyframes, each once; past a quarter of the map, recomputes all.
-    pub fn refresh_moved(&mut self, model: &Model, moved: &[usize], estimate: &[Pose2]) {
+    pub fn refresh_moved<P: EnginePose>(&mut self, model: &Model<P>, moved: &[usize], estimate: &[P]) {
         if moved.len() * 4 > model.graph.len() {
             self.recompute(model, estimate);
             return;
@@ -80,24 +81,14 @@ impl Chi2Cache {
     }
 
     /// Recomputes every term (kills round-off drift of the running sum).
-    pub fn recompute(&mut self, model: &Model, estimate: &[Pose2]) {
+    pub fn recompute<P: EnginePose>(&mut self, model: &Model<P>, estimate: &[P]) {
         for (e, edge) in model.graph.edges().iter().enumerate() {
             self.per_edge[e] = if model.edges[e].applied {
-                model.weight(e) * self.turned_chi2(e, edge, estimate)
+                model.weight(e) * P::cached_chi2(&mut self.turns, &mut self.measured_turns, e, edge, estimate)
             } else {
                 0.0
             };
         }
         self.total = self.per_edge.iter().sum();
-    }
-
-    /// `eᵀ Ω e` of edge `e` at `estimate`, the rotations from the caches
-    /// (the sines and cosines dominate the bookkeeping otherwise).
-    fn turned_chi2(&mut self, e: usize, edge: &Edge, estimate: &[Pose2]) -> f64 {
-        let (xi, xj) = (&estimate[edge.from], &estimate[edge.to]);
-        let turn_i = self.turns.get(edge.from, xi.theta);
-        let turn_m = self.measured_turns.get(e, edge.measurement.theta);
-        edge.information
-            .mahalanobis(&edge_error_turned(edge, xi, turn_i, xj, turn_m))
     }
 }

@@ -1,15 +1,16 @@
-//! [`GaussNewton`]: the normal equations of the SE(2) cost linearised at a
-//! fixed point, kept factorised as edges arrive (iSAM's scheme).
+//! [`GaussNewton`]: the normal equations of the SE(2) or SE(3) cost
+//! linearised at a fixed point, kept factorised as edges arrive (iSAM's
+//! scheme).
 //!
 //! Between re-solves every edge is linearised at `lin`, the poses of the
 //! last polish (a new keyframe: where its first edge puts it). The system
-//! `H δ = −g` with `H = Σ s Jᵀ Ω J`, `g = Σ s Jᵀ Ω e` then grows by a rank-3
-//! update per edge, and the estimate is `lin + δ`: one Gauss–Newton step
+//! `H δ = −g` with `H = Σ s Jᵀ Ω J`, `g = Σ s Jᵀ Ω e` then grows by a
+//! rank-`DOF` update per edge, and the estimate is `lin + δ`: one Gauss–Newton step
 //! from the polished map over everything seen since. A re-solve
 //! relinearises by building a new one.
 //!
 //! The factor is of the augmented matrix `[H −g; −gᵀ χ²(lin)]`
-//! ([`AugmentedCholesky`]): with `Ω = L Lᵀ`, an edge is the three vectors
+//! ([`AugmentedCholesky`]): with `Ω = L Lᵀ`, an edge is the `DOF` vectors
 //! `[Lᵀ J | −Lᵀ e]` (rows of `Lᵀ`), so its update carries its gradient and
 //! cost, the forward solve rides along the update's walk, and the last
 //! pivot is the χ² the linear model predicts.
@@ -20,9 +21,9 @@
 //! share once. A downdate goes in at once, so that its failure surfaces
 //! where it is asked for.
 
+use super::pose::EnginePose;
 use crate::geometry::Pose2;
-use crate::graph::{Edge, PoseGraph};
-use crate::nonlinear::se2::jacobian;
+use crate::graph::{Edge, InformationMatrix, PoseGraph};
 use crate::nonlinear::structure::{HessianStructure, NONE};
 use crate::nonlinear::{PositionPrior, Problem};
 use crate::sparse::dynamic::{AugmentedCholesky, DynamicLdlt, Marginal, UpdateError, MAX_RANK};
@@ -30,14 +31,14 @@ use crate::sparse::FactorError;
 
 /// The linearised system and the estimate it gives.
 #[derive(Clone, Debug)]
-pub struct GaussNewton {
-    /// First of the three columns of each keyframe, or `NONE`.
+pub struct GaussNewton<P: EnginePose = Pose2> {
+    /// First of the `DOF` columns of each keyframe, or `NONE`.
     column: Vec<u32>,
     /// The keyframe owning each column.
     keyframe_of: Vec<u32>,
     chol: AugmentedCholesky<f64>,
-    lin: Vec<Pose2>,
-    estimate: Vec<Pose2>,
+    lin: Vec<P>,
+    estimate: Vec<P>,
     changed: Vec<usize>,
     stamp: Vec<u32>,
     epoch: u32,
@@ -46,9 +47,9 @@ pub struct GaussNewton {
     marginal: Marginal,
 }
 
-impl GaussNewton {
+impl<P: EnginePose> GaussNewton<P> {
     /// A system holding only the gauge keyframe at `gauge`.
-    pub fn new(gauge: Pose2) -> Self {
+    pub fn new(gauge: P) -> Self {
         Self {
             column: vec![NONE],
             keyframe_of: Vec::new(),
@@ -67,10 +68,10 @@ impl GaussNewton {
     /// keyframes `order` (gauge excluded) in elimination order, `edges` with
     /// their scales, and position `priors` (GPS).
     pub fn build(
-        graph: &PoseGraph,
+        graph: &PoseGraph<P>,
         edges: &[(usize, f64)],
-        priors: &[PositionPrior],
-        lin: Vec<Pose2>,
+        priors: &[PositionPrior<P>],
+        lin: Vec<P>,
         order: &[usize],
     ) -> Result<Self, FactorError> {
         let n = graph.len();
@@ -78,7 +79,7 @@ impl GaussNewton {
         for (b, &k) in order.iter().enumerate() {
             block_of[k] = b as u32;
         }
-        let scaled: Vec<Edge> = edges
+        let scaled: Vec<Edge<P>> = edges
             .iter()
             .map(|&(e, s)| {
                 let mut edge = graph.edges()[e];
@@ -86,7 +87,7 @@ impl GaussNewton {
                 edge
             })
             .collect();
-        let structure = HessianStructure::new(block_of.clone(), order.len(), &scaled);
+        let structure = HessianStructure::<P>::new(block_of.clone(), order.len(), &scaled);
         let mut h = structure.pattern().clone();
         let mut g = vec![0.0; structure.dim()];
         structure.assemble(&scaled, None, priors, &lin, &mut h, &mut g);
@@ -97,9 +98,12 @@ impl GaussNewton {
         let chol = AugmentedCholesky::new(factor, &b, lin_chi2);
         let column = block_of
             .iter()
-            .map(|&b| if b == NONE { NONE } else { 3 * b })
+            .map(|&b| if b == NONE { NONE } else { P::DOF as u32 * b })
             .collect();
-        let keyframe_of = order.iter().flat_map(|&k| [k as u32; 3]).collect();
+        let keyframe_of = order
+            .iter()
+            .flat_map(|&k| std::iter::repeat_n(k as u32, P::DOF))
+            .collect();
         let mut gn = Self {
             column,
             keyframe_of,
@@ -120,11 +124,11 @@ impl GaussNewton {
 
     /// Keyframe `k` joins at `guess`. Keyframes that have not joined keep
     /// their slot with no columns.
-    pub fn add_keyframe(&mut self, k: usize, guess: Pose2) {
+    pub fn add_keyframe(&mut self, k: usize, guess: P) {
         if self.column.len() <= k {
             self.column.resize(k + 1, NONE);
-            self.lin.resize(k + 1, Pose2::IDENTITY);
-            self.estimate.resize(k + 1, Pose2::IDENTITY);
+            self.lin.resize(k + 1, P::IDENTITY);
+            self.estimate.resize(k + 1, P::IDENTITY);
             self.stamp.resize(k + 1, 0);
         }
         self.lin[k] = guess;
@@ -133,53 +137,51 @@ impl GaussNewton {
             return;
         }
         let c = self.chol.append();
-        self.chol.append();
-        self.chol.append();
+        for _ in 1..P::DOF {
+            self.chol.append();
+        }
         self.column[k] = c as u32;
-        self.keyframe_of.extend([k as u32; 3]);
+        self.keyframe_of.extend(std::iter::repeat_n(k as u32, P::DOF));
     }
 
     /// Adds `delta` times the edge's terms, linearised at `lin`. An update
     /// (`delta > 0`) waits for the next solve; a downdate is applied now.
-    pub fn apply_edge(&mut self, edge: &Edge, delta: f64) -> Result<(), UpdateError> {
-        let (j, e) = jacobian(edge, &self.lin[edge.from], &self.lin[edge.to]);
-        let cols: [Option<usize>; 6] = std::array::from_fn(|a| {
-            let k = if a < 3 { edge.from } else { edge.to };
-            let c = self.column[k];
-            (c != NONE).then(|| c as usize + a % 3)
-        });
+    pub fn apply_edge(&mut self, edge: &Edge<P>, delta: f64) -> Result<(), UpdateError> {
+        let dof = P::DOF;
+        let (ci, cj) = (self.column[edge.from], self.column[edge.to]);
+        let col = |a: usize| {
+            let c = if a < dof { ci } else { cj };
+            (c != NONE).then(|| c as usize + a % dof)
+        };
         // Ω = L Lᵀ, so [Jᵀ; −eᵀ] Ω [J −e] = Σ_r [Lᵀ J | −Lᵀ e]_rᵀ [Lᵀ J | −Lᵀ e]_r
-        let lt = sqrt_information(&edge.information.matrix()).transpose();
-        let (rows, tails) = (lt * j, -(lt * e));
+        let (rows, tails) = P::whitened(edge, &self.lin[edge.from], &self.lin[edge.to]);
         let root = delta.abs().sqrt();
-        let vectors = (0..3).map(|r| {
-            let w = cols
-                .iter()
-                .enumerate()
-                .filter_map(|(a, c)| c.map(|c| (c, rows[(r, a)] * root)))
+        let vectors = (0..dof).map(|r| {
+            let w = (0..2 * dof)
+                .filter_map(|a| col(a).map(|c| (c, rows[(r, a)] * root)))
                 .collect();
             (w, tails[r] * root)
         });
         self.apply(vectors, delta.signum())
     }
 
-    /// Adds a position prior linearised at `lin`: error `e = p_k − target`,
-    /// Jacobian `[I₂ 0]`, so a rank-2 update on the keyframe's `x, y`
-    /// columns. On the gauge it only adds to the cost.
-    pub fn apply_prior(&mut self, prior: &PositionPrior) -> Result<(), UpdateError> {
-        let p = self.lin[prior.keyframe].position() - prior.target;
-        let e = nalgebra::Vector2::new(p.re, p.im);
-        let omega = prior.information;
+    /// Adds a position prior linearised at `lin` (error `e = p_k − target`):
+    /// a low-rank update on the keyframe's columns
+    /// ([`EnginePose::prior_rows`]). On the gauge it only adds to the cost.
+    pub fn apply_prior(&mut self, prior: &PositionPrior<P>) -> Result<(), UpdateError> {
+        let pose = self.lin[prior.keyframe];
         let c = self.column[prior.keyframe];
         if c == NONE {
-            self.chol.add_cost((e.transpose() * omega * e)[0]);
+            self.chol
+                .add_cost(pose.prior_chi2(&prior.target, &prior.information));
             return Ok(());
         }
         let c = c as usize;
-        // Ω = L Lᵀ: rows of Lᵀ, tails −Lᵀ e
-        let lt = sqrt_information(&omega).transpose();
-        let tails = -(lt * e);
-        let vectors = (0..2).map(|r| (vec![(c, lt[(r, 0)]), (c + 1, lt[(r, 1)])], tails[r]));
+        let rows = pose.prior_rows(prior);
+        let vectors = rows.into_iter().map(|(w, tail)| {
+            let w: Vec<(usize, f64)> = w.into_iter().map(|(a, v)| (c + a, v)).collect();
+            (w, tail)
+        });
         self.apply(vectors, 1.0)
     }
 
@@ -192,17 +194,16 @@ impl GaussNewton {
     /// updates first. `None` when a keyframe has no columns or no weight.
     pub fn innovation_chi2(
         &mut self,
-        edge: &Edge,
-        e: &[f64; 3],
+        edge: &Edge<P>,
+        e: &P::Error,
         variance_factor: f64,
     ) -> Result<Option<f64>, UpdateError> {
         self.flush()?;
-        let (j, _) = jacobian(edge, &self.lin[edge.from], &self.lin[edge.to]);
-        let mut v: [Vec<(usize, f64)>; 3] = Default::default();
-        for (a, k) in [edge.from, edge.from, edge.from, edge.to, edge.to, edge.to]
-            .into_iter()
-            .enumerate()
-        {
+        let dof = P::DOF;
+        let j = P::jacobian(edge, &self.lin[edge.from], &self.lin[edge.to]);
+        let mut v: Vec<Vec<(usize, f64)>> = vec![Vec::new(); dof];
+        for a in 0..2 * dof {
+            let k = if a < dof { edge.from } else { edge.to };
             let c = self.column[k];
             if c == NONE {
                 // the gauge is fixed; any other keyframe must be in
@@ -212,19 +213,14 @@ impl GaussNewton {
                 continue;
             }
             for (r, w) in v.iter_mut().enumerate() {
-                w.push((c as usize + a % 3, j[(r, a)]));
+                w.push((c as usize + a % dof, j[(r, a)]));
             }
         }
-        let Some(jsj) = self.marginal.form(self.chol.factor(), [&v[0], &v[1], &v[2]]) else {
+        let slices: Vec<&[(usize, f64)]> = v.iter().map(|w| &w[..]).collect();
+        let Some(jsj) = self.marginal.form(self.chol.factor(), &slices) else {
             return Ok(None);
         };
-        let s = edge
-            .information
-            .matrix()
-            .try_inverse()
-            .map(|cov| cov + variance_factor * jsj);
-        let e = nalgebra::Vector3::from(*e);
-        Ok(s.and_then(|s| s.cholesky()).map(|c| e.dot(&c.solve(&e))))
+        Ok(P::innovation_chi2(&edge.information, e, &jsj, variance_factor))
     }
 
     /// Batches update vectors (`sigma > 0`), or applies a downdate now
@@ -288,9 +284,8 @@ impl GaussNewton {
         if c == NONE {
             return;
         }
-        let x = &self.chol.x()[c as usize..c as usize + 3];
-        let l = self.lin[k];
-        self.estimate[k] = Pose2::new(l.x + x[0], l.y + x[1], l.theta + x[2]);
+        let x = &self.chol.x()[c as usize..c as usize + P::DOF];
+        self.estimate[k] = self.lin[k].retract(x);
     }
 
     /// The χ² the linear model predicts at its solution:
@@ -302,12 +297,12 @@ impl GaussNewton {
     }
 
     /// The linearisation point `lin` of every keyframe slot.
-    pub fn linearisation(&self) -> &[Pose2] {
+    pub fn linearisation(&self) -> &[P] {
         &self.lin
     }
 
     /// The current estimate of every keyframe slot.
-    pub fn estimate(&self) -> &[Pose2] {
+    pub fn estimate(&self) -> &[P] {
         &self.estimate
     }
 
@@ -325,17 +320,4 @@ impl GaussNewton {
     pub fn factor_nnz(&self) -> usize {
         self.chol.factor().nnz()
     }
-}
-
-/// A square root `L` of an information matrix, `Ω = L Lᵀ` (Cholesky; the
-/// square roots of the diagonal for one that is not positive definite,
-/// which the graph refuses at its door).
-fn sqrt_information<const N: usize>(omega: &nalgebra::SMatrix<f64, N, N>) -> nalgebra::SMatrix<f64, N, N>
-where
-    nalgebra::Const<N>: nalgebra::DimMin<nalgebra::Const<N>, Output = nalgebra::Const<N>>,
-{
-    omega
-        .cholesky()
-        .map(|c| c.l())
-        .unwrap_or_else(|| nalgebra::SMatrix::from_diagonal(&omega.diagonal().map(|v| v.max(0.0).sqrt())))
 }

@@ -60,6 +60,7 @@ pub mod gauss_newton;
 pub mod linear_stages;
 mod model;
 mod op;
+pub mod pose;
 mod rebuild;
 mod report;
 mod resolve;
@@ -72,6 +73,7 @@ mod state;
 pub use config::EngineConfig;
 pub use error::EngineError;
 pub use op::{Op, SnapshotSource};
+pub use pose::EnginePose;
 pub use report::{EngineStats, FactorWork, UpdateReport};
 pub use slamd_types::{EdgeInput, FixInput};
 pub use snapshot::Snapshot;
@@ -85,12 +87,13 @@ use op::Polish;
 use schedule::Schedule;
 use state::State;
 
-/// The incremental pose-graph solver.
-pub struct Engine {
+/// The incremental pose-graph solver, planar (`Engine`, the default) or
+/// spatial (`Engine<Pose3>`, made by [`Engine::create`]).
+pub struct Engine<P: EnginePose = Pose2> {
     /// Declared first, so dropped first: a running job is stopped before
     /// the state it would swap in for is freed.
-    background: Background,
-    state: State,
+    background: Background<P>,
+    state: State<P>,
     config: EngineConfig,
     schedule: Schedule,
     version: u64,
@@ -106,8 +109,27 @@ pub struct Engine {
 }
 
 impl Engine {
-    /// An empty engine.
+    /// An empty planar engine.
     pub fn new(config: EngineConfig) -> Self {
+        Self::create(config)
+    }
+}
+
+impl<P: EnginePose> Engine<P> {
+    /// An empty engine for poses `P`. The outlier filter's default
+    /// thresholds move to `P`'s degrees of freedom
+    /// ([`OutlierConfig::for_dof`](crate::outliers::OutlierConfig::for_dof));
+    /// a setting `P` has no use for ([`EnginePose::check`]) is turned off
+    /// with a warning.
+    pub fn create(mut config: EngineConfig) -> Self {
+        config.outliers = config.outliers.for_dof(P::DOF);
+        if let Err(reason) = P::check(&config) {
+            tracing::warn!(%reason, "Turned off.");
+            config.outliers.cycles = false;
+            config.outliers.pairwise = false;
+            config.linear_stages = false;
+            config.snapshot = SnapshotSource::GaussNewton;
+        }
         Self {
             state: State::new(&config),
             background: Background::default(),
@@ -122,52 +144,6 @@ impl Engine {
         }
     }
 
-    /// An engine holding `map`: its keyframes, edges with their weights
-    /// and switches, fixes and georeference, the factor built once at the
-    /// saved linearisation point. With `polish` (keyframes or edges that
-    /// the map's estimate does not cover yet), a re-solve's robust polish
-    /// runs first, over everything. The map's GPS origin wins over the
-    /// configured one (its fixes are relative to it).
-    pub fn restore(
-        config: EngineConfig,
-        map: &crate::store::MapFile,
-        polish: bool,
-    ) -> Result<Self, EngineError> {
-        let mut engine = Engine::new(config);
-        if let Some(o) = map.origin {
-            if engine.frame.is_some_and(|f| f.origin != o) {
-                tracing::warn!(?o, "The saved map has its own GPS origin; using it.");
-            }
-            engine.frame = Some(LocalFrame::new(o));
-        }
-        if engine.frame.is_none() {
-            // the first fix sets the origin, as in add_gps
-            let first = map.fixes.first().map(|f| f.position);
-            engine.frame = first
-                .and_then(|p| Geodetic::new(p.lat, p.lon, p.height).ok())
-                .map(LocalFrame::new);
-        }
-        let polish = if polish { Polish::Full } else { Polish::None };
-        let state = restore::state_of(map, engine.frame, polish, &engine.config)?;
-        engine.work_base = state.work();
-        engine.schedule.fresh(&state);
-        engine.schedule.polished(&state);
-        engine.state = state;
-        engine.fixes = map.fixes.clone();
-        engine.version = 1;
-        if polish == Polish::Full {
-            engine.stats.resolves += 1;
-        }
-        Ok(engine)
-    }
-
-    /// The map as it stands: keyframes, edges with their weights and
-    /// switches, the estimate, the GPS origin, fixes and georeference.
-    /// Edge origins, acknowledgements and held messages are left empty.
-    pub fn map(&self) -> crate::store::MapFile {
-        restore::map_of(&self.state, self.gps_origin(), &self.fixes)
-    }
-
     /// The configuration.
     pub fn config(&self) -> &EngineConfig {
         &self.config
@@ -176,32 +152,9 @@ impl Engine {
     /// Adds a keyframe; the first one is the gauge. `guess` is a pose in
     /// the map frame; without one, the keyframe's first edge to the map
     /// places it. Returns its index.
-    pub fn add_keyframe(&mut self, id: KeyframeId, guess: Option<Pose2>) -> Result<usize, EngineError> {
+    pub fn add_keyframe(&mut self, id: KeyframeId, guess: Option<P>) -> Result<usize, EngineError> {
         self.submit(Op::Keyframe { id, guess })?;
         Ok(self.state.model.graph.len() - 1)
-    }
-
-    /// Adds a GPS fix to a known keyframe (the daemon holds fixes that
-    /// overtake their keyframe, as it holds edges). The first fix sets the
-    /// ENU origin unless the configuration names one. Fixes enter the
-    /// estimate as absolute position priors once a re-solve has
-    /// georeferenced the map; one starts as soon as two fixes are in, and
-    /// again whenever their number has doubled.
-    pub fn add_gps(&mut self, fix: FixInput) -> Result<(), EngineError> {
-        let p = fix.position;
-        let position = Geodetic::new(p.lat, p.lon, p.height).map_err(EngineError::Gps)?;
-        let cov = covariance(fix.covariance).map_err(EngineError::Gps)?;
-        let k =
-            (self.state.model.graph.index_of(fix.keyframe)).ok_or(EngineError::FixKeyframe(fix.keyframe))?;
-        let frame = *self.frame.get_or_insert(LocalFrame::new(position));
-        let (e, n, _) = frame.to_enu(&position);
-        self.submit(Op::Gps(GpsFix {
-            keyframe: k,
-            enu: c64::new(e, n),
-            covariance: cov,
-        }))?;
-        self.fixes.push(fix);
-        Ok(())
     }
 
     /// The ENU frame's origin, once known.
@@ -211,7 +164,7 @@ impl Engine {
 
     /// Adds an edge between two known keyframes and returns its index. It
     /// joins the estimate when it links to the gauge's part of the graph.
-    pub fn add_edge(&mut self, edge: EdgeInput) -> Result<usize, EngineError> {
+    pub fn add_edge(&mut self, edge: EdgeInput<P>) -> Result<usize, EngineError> {
         self.submit(Op::Edge(edge))?;
         self.schedule.edge_added();
         Ok(self.state.model.graph.edges().len() - 1)
@@ -229,7 +182,7 @@ impl Engine {
         self.set_edge_weight(edge, 0.0)
     }
 
-    fn submit(&mut self, op: Op) -> Result<(), EngineError> {
+    fn submit(&mut self, op: Op<P>) -> Result<(), EngineError> {
         match self.state.apply(&op) {
             Ok(()) => {}
             Err(EngineError::Numeric(e)) => {
@@ -322,7 +275,7 @@ impl Engine {
     }
 
     /// The current estimate.
-    pub fn snapshot(&self) -> Snapshot<'_> {
+    pub fn snapshot(&self) -> Snapshot<'_, P> {
         let m = &self.state.model;
         Snapshot {
             version: self.version,
@@ -336,14 +289,8 @@ impl Engine {
         }
     }
 
-    /// The exact two-stage linear solution of everything so far (needs
-    /// `linear_stages`), indexed like the keyframes.
-    pub fn linear_solution(&mut self) -> Option<Vec<Pose2>> {
-        self.state.linear_solution()
-    }
-
     /// The graph as the engine holds it (keyframes in arrival order).
-    pub fn graph(&self) -> &crate::graph::PoseGraph {
+    pub fn graph(&self) -> &crate::graph::PoseGraph<P> {
         &self.state.model.graph
     }
 
@@ -448,7 +395,7 @@ impl Engine {
 
     /// Catches the job's state up with the ops in `log` and makes it
     /// current.
-    fn swap_in(&mut self, outcome: resolve::Outcome, log: Vec<(u64, Op)>) -> bool {
+    fn swap_in(&mut self, outcome: resolve::Outcome<P>, log: background::Log<P>) -> bool {
         let resolve::Outcome {
             state,
             last_seq,
@@ -495,10 +442,88 @@ impl Engine {
     }
 }
 
+/// What only the planar engine has so far: saved maps and GPS.
 impl Engine {
+    /// An engine holding `map`: its keyframes, edges with their weights
+    /// and switches, fixes and georeference, the factor built once at the
+    /// saved linearisation point. With `polish` (keyframes or edges that
+    /// the map's estimate does not cover yet), a re-solve's robust polish
+    /// runs first, over everything. The map's GPS origin wins over the
+    /// configured one (its fixes are relative to it).
+    pub fn restore(
+        config: EngineConfig,
+        map: &crate::store::MapFile,
+        polish: bool,
+    ) -> Result<Self, EngineError> {
+        let mut engine = Engine::new(config);
+        if let Some(o) = map.origin {
+            if engine.frame.is_some_and(|f| f.origin != o) {
+                tracing::warn!(?o, "The saved map has its own GPS origin; using it.");
+            }
+            engine.frame = Some(LocalFrame::new(o));
+        }
+        if engine.frame.is_none() {
+            // the first fix sets the origin, as in add_gps
+            let first = map.fixes.first().map(|f| f.position);
+            engine.frame = first
+                .and_then(|p| Geodetic::new(p.lat, p.lon, p.height).ok())
+                .map(LocalFrame::new);
+        }
+        let polish = if polish { Polish::Full } else { Polish::None };
+        let state = restore::state_of(map, engine.frame, polish, &engine.config)?;
+        engine.work_base = state.work();
+        engine.schedule.fresh(&state);
+        engine.schedule.polished(&state);
+        engine.state = state;
+        engine.fixes = map.fixes.clone();
+        engine.version = 1;
+        if polish == Polish::Full {
+            engine.stats.resolves += 1;
+        }
+        Ok(engine)
+    }
+
+    /// The map as it stands: keyframes, edges with their weights and
+    /// switches, the estimate, the GPS origin, fixes and georeference.
+    /// Edge origins, acknowledgements and held messages are left empty.
+    pub fn map(&self) -> crate::store::MapFile {
+        restore::map_of(&self.state, self.gps_origin(), &self.fixes)
+    }
+
+    /// Adds a GPS fix to a known keyframe (the daemon holds fixes that
+    /// overtake their keyframe, as it holds edges). The first fix sets the
+    /// ENU origin unless the configuration names one. Fixes enter the
+    /// estimate as absolute position priors once a re-solve has
+    /// georeferenced the map; one starts as soon as two fixes are in, and
+    /// again whenever their number has doubled.
+    pub fn add_gps(&mut self, fix: FixInput) -> Result<(), EngineError> {
+        let p = fix.position;
+        let position = Geodetic::new(p.lat, p.lon, p.height).map_err(EngineError::Gps)?;
+        let cov = covariance(fix.covariance).map_err(EngineError::Gps)?;
+        let k =
+            (self.state.model.graph.index_of(fix.keyframe)).ok_or(EngineError::FixKeyframe(fix.keyframe))?;
+        let frame = *self.frame.get_or_insert(LocalFrame::new(position));
+        let (e, n, _) = frame.to_enu(&position);
+        self.submit(Op::Gps(GpsFix {
+            keyframe: k,
+            enu: c64::new(e, n),
+            covariance: cov,
+        }))?;
+        self.fixes.push(fix);
+        Ok(())
+    }
+
+    /// The exact two-stage linear solution of everything so far (needs
+    /// `linear_stages`), indexed like the keyframes.
+    pub fn linear_solution(&mut self) -> Option<Vec<Pose2>> {
+        self.state.linear_solution()
+    }
+}
+
+impl<P: EnginePose> Engine<P> {
     /// Makes `state` current; its work counters stood at `base` when this
     /// thread's work on it began.
-    fn replace_state(&mut self, state: State, base: FactorWork) {
+    fn replace_state(&mut self, state: State<P>, base: FactorWork) {
         self.work_done += self.state.work() - self.work_base;
         self.work_base = base;
         retire(std::mem::replace(&mut self.state, state));
@@ -519,7 +544,7 @@ const RELINEARISE_SLACK: f64 = 0.01;
 
 /// Drops a replaced state on a thread of its own: freeing a factor's
 /// tens of thousands of columns is work the foreground need not wait for.
-fn retire(old: State) {
+fn retire<P: EnginePose>(old: State<P>) {
     // without a thread (resource limits) the closure, and the state with
     // it, is dropped here
     let _ = std::thread::Builder::new()

@@ -4,11 +4,11 @@
 //! (robust polish, georeferencing).
 
 use super::op::Polish;
+use super::pose::EnginePose;
 use super::EngineConfig;
 use crate::geometry::Pose2;
 use crate::gps::{variance_factor, Georef, GpsConfig, GpsFix, GpsInput};
-use crate::graph::{chi2_of_edges, Edge, PoseGraph};
-use crate::linear::two_stage;
+use crate::graph::{chi2_of_edges, Edge, InformationMatrix, PoseGraph};
 use crate::nonlinear::{LevenbergMarquardtParams, PositionPrior};
 use crate::outliers::consistency::ConsistencyGraph;
 use crate::outliers::cycles;
@@ -55,9 +55,9 @@ impl EdgeState {
 
 /// The graph and its bookkeeping, without the solvers.
 #[derive(Clone, Debug, Default)]
-pub struct Model {
+pub struct Model<P: EnginePose = Pose2> {
     /// Keyframes in arrival order (index 0 is the gauge) and every edge.
-    pub graph: PoseGraph,
+    pub graph: PoseGraph<P>,
     /// What the engine holds of each edge, by index.
     pub edges: Vec<EdgeState>,
     /// Whether each keyframe has joined (is linked to the gauge).
@@ -83,7 +83,7 @@ pub struct Model {
     pub consistency: Arc<Mutex<ConsistencyGraph>>,
 }
 
-impl Model {
+impl<P: EnginePose> Model<P> {
     /// The multiplier of edge `e`'s information: `scale · s²`, or 0 when
     /// the switch is off ([`OFF_BELOW`]).
     pub fn weight(&self, e: usize) -> f64 {
@@ -99,20 +99,20 @@ impl Model {
     }
 
     /// The prior of fix `f` under the current georeference.
-    pub(super) fn prior(&self, f: usize) -> Option<PositionPrior> {
+    pub(super) fn prior(&self, f: usize) -> Option<PositionPrior<P>> {
         let g = self.georef.as_ref()?;
-        Some(self.fixes[f].prior(g, self.gps_weight))
+        P::gps_prior(&self.fixes[f], g, self.gps_weight)
     }
 }
 
-impl Model {
+impl<P: EnginePose> Model<P> {
     /// The applied edges of nonzero scale over compact keyframe indices,
     /// their information scaled by `weight(model, e)`, with their indices.
     pub(super) fn compact_edges(
         &self,
         compact: &[usize],
-        weight: impl Fn(&Model, usize) -> f64,
-    ) -> (Vec<Edge>, Vec<usize>) {
+        weight: impl Fn(&Self, usize) -> f64,
+    ) -> (Vec<Edge<P>>, Vec<usize>) {
         let ids: Vec<usize> = (0..self.graph.edges().len())
             .filter(|&e| self.edges[e].applied && self.edges[e].scale > 0.0)
             .collect();
@@ -155,20 +155,20 @@ impl Model {
         config: &EngineConfig,
         compact: &[usize],
         joined: &[usize],
-        lin: &[Pose2],
+        lin: &[P],
         polish: Polish,
         stop: &AtomicBool,
-    ) -> Vec<Pose2> {
+    ) -> Vec<P> {
         let filter = &config.outliers;
         let (edges, ids) = self.compact_edges(compact, |m, e| m.edges[e].scale);
         let switchable: Vec<bool> = ids
             .iter()
             .map(|&e| filter.switchable(&self.graph.edges()[e]))
             .collect();
-        let initial: Vec<Pose2> = joined.iter().map(|&k| lin[k]).collect();
+        let initial: Vec<P> = joined.iter().map(|&k| lin[k]).collect();
         let held_out = cycles::either(
             self.held_out(filter, &ids, &switchable),
-            cycles::rejected(initial.len(), &edges, &switchable, filter),
+            P::cycle_rejected(initial.len(), &edges, &switchable, filter),
         );
         let starts = self.starts(config, compact, joined, &initial, &ids, polish);
         let threads = if matches!(polish, Polish::FullInline | Polish::Closing) {
@@ -201,15 +201,7 @@ impl Model {
         if !(filter.enabled && filter.pairwise) {
             return Vec::new();
         }
-        let edges = self.graph.edges();
-        let mut graph = self.consistency.lock().unwrap_or_else(|e| e.into_inner());
-        graph.update(
-            self.graph.len(),
-            edges,
-            |e| filter.switchable(&edges[e]),
-            filter.pairwise_chi2,
-        );
-        graph.held_out(ids, switchable)
+        P::pairwise_held_out(&self.consistency, &self.graph, filter, ids, switchable)
     }
 
     /// The starts of [`Self::robust_polish`] (`ids`: the graph indices of
@@ -220,10 +212,10 @@ impl Model {
         config: &EngineConfig,
         compact: &[usize],
         joined: &[usize],
-        initial: &[Pose2],
+        initial: &[P],
         ids: &[usize],
         polish: Polish,
-    ) -> Vec<Vec<Pose2>> {
+    ) -> Vec<Vec<P>> {
         let mut starts = vec![initial.to_vec()];
         if matches!(polish, Polish::Full | Polish::FullInline | Polish::Closing) {
             // the two-stage solution under the current switches, and (when
@@ -234,7 +226,7 @@ impl Model {
             // closure is held wrong (below 0.5): the pessimistic weights of
             // most datasets leave a few true ones a little below 1, and no
             // refresh lands while a longer re-solve runs
-            starts.extend(self.linear_start(compact, joined, initial[0], Model::weight));
+            starts.extend(self.linear_start(compact, joined, initial[0], Self::weight));
             let rescue_below = if polish == Polish::Full {
                 REJECTED_BELOW
             } else {
@@ -250,7 +242,7 @@ impl Model {
             // their basin
             let unadmitted_due = polish == Polish::Closing || config.outliers.unadmitted_start;
             if unadmitted_due && ids.iter().any(|&e| self.edges[e].admitted) {
-                let unadmitted = |m: &Model, e: usize| if m.edges[e].admitted { 0.0 } else { m.weight(e) };
+                let unadmitted = |m: &Self, e: usize| if m.edges[e].admitted { 0.0 } else { m.weight(e) };
                 starts.extend(self.linear_start(compact, joined, initial[0], unadmitted));
             }
         }
@@ -263,53 +255,32 @@ impl Model {
         &self,
         compact: &[usize],
         joined: &[usize],
-        gauge: Pose2,
-        weight: fn(&Model, usize) -> f64,
-    ) -> Option<Vec<Pose2>> {
+        gauge: P,
+        weight: fn(&Self, usize) -> f64,
+    ) -> Option<Vec<P>> {
         let keyframes: Vec<_> = joined.iter().map(|&k| self.graph.keyframes()[k]).collect();
         let (weighted, _) = self.compact_edges(compact, weight);
         let weighted = weighted
             .into_iter()
-            .filter(|e| e.information.upper() != [0.0; 6])
+            .filter(|e| !e.information.is_zero())
             .collect();
-        let linear = two_stage::solve(&PoseGraph::from_parts(keyframes, weighted).ok()?).ok()?;
+        let linear = P::linear_solution(&PoseGraph::from_parts(keyframes, weighted).ok()?)?;
         Some(linear.iter().map(|p| gauge.compose(p)).collect())
     }
 
     /// With two or more fixes on the joined keyframes: sets the GPS weight
     /// from the polished graph's χ², fits the georeference to `poses`
     /// (compact: `compact[k]` is keyframe `k`'s index), polishes with the
-    /// fixes as priors and refits, twice.
+    /// fixes as priors and refits, twice ([`EnginePose::georeference`]).
     pub(super) fn georeference(
         &mut self,
         config: &GpsConfig,
-        edges: &[Edge],
+        edges: &[Edge<P>],
         compact: &[usize],
-        poses: &mut Vec<Pose2>,
+        poses: &mut Vec<P>,
         params: &LevenbergMarquardtParams,
     ) {
-        let fixes: Vec<GpsFix> = (self.fixes.iter())
-            .filter(|f| self.joined[f.keyframe])
-            .map(|f| GpsFix {
-                keyframe: compact[f.keyframe],
-                ..*f
-            })
-            .collect();
-        if !config.absolute || fixes.len() < 2 {
-            return;
-        }
-        let mut input = GpsInput::with_config(fixes, config);
-        if config.calibrate {
-            input.weight = variance_factor(chi2_of_edges(edges, poses), edges.len(), poses.len());
-        }
-        // a polish that fails ends the rounds with the fit it started from:
-        // repeating it from the same poses would fail the same way
-        let mut georef = None;
-        let _ = input.georeference(edges, poses, &mut georef, *params, 2);
-        if let Some(g) = georef {
-            self.georef = Some(g);
-            self.gps_weight = input.weight;
-        }
+        P::georeference(self, config, edges, compact, poses, params)
     }
 
     /// Keyframes (other than the gauge) left without any weighted edge are
@@ -343,6 +314,41 @@ impl Model {
                     }
                 }
             }
+        }
+    }
+}
+
+impl Model {
+    /// [`Model::georeference`] in the plane.
+    pub(super) fn georeference_planar(
+        &mut self,
+        config: &GpsConfig,
+        edges: &[Edge],
+        compact: &[usize],
+        poses: &mut Vec<Pose2>,
+        params: &LevenbergMarquardtParams,
+    ) {
+        let fixes: Vec<GpsFix> = (self.fixes.iter())
+            .filter(|f| self.joined[f.keyframe])
+            .map(|f| GpsFix {
+                keyframe: compact[f.keyframe],
+                ..*f
+            })
+            .collect();
+        if !config.absolute || fixes.len() < 2 {
+            return;
+        }
+        let mut input = GpsInput::with_config(fixes, config);
+        if config.calibrate {
+            input.weight = variance_factor(chi2_of_edges(edges, poses), edges.len(), poses.len());
+        }
+        // a polish that fails ends the rounds with the fit it started from:
+        // repeating it from the same poses would fail the same way
+        let mut georef = None;
+        let _ = input.georeference(edges, poses, &mut georef, *params, 2);
+        if let Some(g) = georef {
+            self.georef = Some(g);
+            self.gps_weight = input.weight;
         }
     }
 }

@@ -2,6 +2,7 @@
 //! shape a [`State`](super::state::State): how a rebuild polishes
 //! ([`Polish`]) and where snapshots come from ([`SnapshotSource`]).
 
+use super::pose::EnginePose;
 use super::EdgeInput;
 use crate::geometry::Pose2;
 use crate::gps::GpsFix;
@@ -9,16 +10,16 @@ use crate::graph::KeyframeId;
 
 /// One change to the graph, as the engine received it.
 #[derive(Clone, Debug)]
-pub enum Op {
+pub enum Op<P: EnginePose = Pose2> {
     /// A new keyframe.
     Keyframe {
         /// Its id.
         id: KeyframeId,
         /// An initial pose in the map frame, if known.
-        guess: Option<Pose2>,
+        guess: Option<P>,
     },
     /// A new edge.
-    Edge(EdgeInput),
+    Edge(EdgeInput<P>),
     /// A GPS fix on a known keyframe, in the engine's ENU frame.
     Gps(GpsFix),
     /// A new weight `scale ∈ [0, ∞)` for an edge (0 removes it).

@@ -5,10 +5,10 @@
 
 use super::model::Model;
 use super::op::Polish;
+use super::pose::EnginePose;
 use super::solvers::Solvers;
 use super::state::State;
 use super::EngineConfig;
-use crate::geometry::Pose2;
 use crate::sparse::ordering::amd_newest_last;
 use crate::sparse::FactorError;
 use std::sync::atomic::AtomicBool;
@@ -16,12 +16,12 @@ use std::sync::atomic::AtomicBool;
 /// A fresh state from `model`: polished from `start` as `polish` says,
 /// re-ordered with the newest `recent_last` keyframes last,
 /// refactorised.
-pub fn rebuild(
-    mut model: Model,
-    start: &[Pose2],
+pub fn rebuild<P: EnginePose>(
+    mut model: Model<P>,
+    start: &[P],
     polish: Polish,
     config: &EngineConfig,
-) -> Result<State, FactorError> {
+) -> Result<State<P>, FactorError> {
     let lin = polish_model(&mut model, start, polish, config, &AtomicBool::new(false));
     factorise(model, lin, config)
 }
@@ -31,24 +31,24 @@ pub fn rebuild(
 /// its switches and georeference; returns the linearisation point of
 /// every keyframe. Once `stop` is set the polish ends where it is and
 /// the georeference is left as it was.
-pub fn polish_model(
-    model: &mut Model,
-    start: &[Pose2],
+pub fn polish_model<P: EnginePose>(
+    model: &mut Model<P>,
+    start: &[P],
     polish: Polish,
     config: &EngineConfig,
     stop: &AtomicBool,
-) -> Vec<Pose2> {
+) -> Vec<P> {
     model.unjoin_unconstrained();
     let n = model.graph.len();
     let mut lin = start.to_vec();
-    lin.resize(n, Pose2::IDENTITY);
+    lin.resize(n, P::IDENTITY);
     if polish != Polish::None {
         let (joined, compact) = model.compact_joined();
         let started = std::time::Instant::now();
         let mut poses = model.robust_polish(config, &compact, &joined, &lin, polish, stop);
         tracing::debug!(seconds = started.elapsed().as_secs_f64(), ?polish, "Polished.");
         if !stop.load(std::sync::atomic::Ordering::Relaxed) {
-            let (edges, _) = model.compact_edges(&compact, Model::weight);
+            let (edges, _) = model.compact_edges(&compact, Model::<P>::weight);
             model.georeference(&config.gps, &edges, &compact, &mut poses, &config.polish);
         }
         for (c, &k) in joined.iter().enumerate() {
@@ -60,7 +60,11 @@ pub fn polish_model(
 
 /// The second half of [`rebuild`]: the fresh factor of `model`
 /// linearised at `lin`.
-pub fn factorise(mut model: Model, lin: Vec<Pose2>, config: &EngineConfig) -> Result<State, FactorError> {
+pub fn factorise<P: EnginePose>(
+    mut model: Model<P>,
+    lin: Vec<P>,
+    config: &EngineConfig,
+) -> Result<State<P>, FactorError> {
     let recent = config.recent_last;
     let (joined, compact) = model.compact_joined();
     let active: Vec<(usize, f64)> = (0..model.graph.edges().len())
@@ -93,6 +97,7 @@ mod tests {
     use super::*;
     use crate::engine::state::tests::{keyframe, odometry};
     use crate::engine::{EdgeInput, Op};
+    use crate::geometry::Pose2;
     use crate::graph::{EdgeKind, Information};
     use crate::outliers::{OutlierConfig, OFF_BELOW};
 

@@ -13,6 +13,7 @@
 //! last op it applied; the foreground replays the few that came after and
 //! swaps.
 
+use super::pose::EnginePose;
 use super::rebuild;
 use super::state::{Model, Op, Polish, State};
 use super::EngineConfig;
@@ -29,9 +30,9 @@ use std::time::Instant;
 pub type Waker = Arc<dyn Fn() + Send + Sync>;
 
 /// What a finished re-solve hands back.
-pub struct Outcome {
+pub struct Outcome<P: EnginePose = Pose2> {
     /// The fresh state, caught up to `last_seq`.
-    pub state: Result<State, FactorError>,
+    pub state: Result<State<P>, FactorError>,
     /// The last forwarded op it applied, if any.
     pub last_seq: Option<u64>,
     /// Wall time of the re-solve.
@@ -41,32 +42,32 @@ pub struct Outcome {
 }
 
 /// What the foreground forwards to a running re-solve.
-pub enum Forward {
+pub enum Forward<P: EnginePose = Pose2> {
     /// An op it applied, with its sequence number.
-    Op(u64, Op),
+    Op(u64, Op<P>),
     /// Its estimate of a keyframe that joined, after an update.
-    Estimate(usize, Pose2),
+    Estimate(usize, P),
 }
 
 /// A running re-solve.
-pub struct Job {
-    ops: Sender<Forward>,
-    done: Receiver<Outcome>,
+pub struct Job<P: EnginePose = Pose2> {
+    ops: Sender<Forward<P>>,
+    done: Receiver<Outcome<P>>,
     handle: Option<JoinHandle<()>>,
     /// Set when nobody waits for the outcome any more.
     stop: Arc<AtomicBool>,
 }
 
-impl Job {
+impl<P: EnginePose> Job<P> {
     /// Starts a re-solve of `model` from `estimate` on a new thread;
     /// `wake` is called there once its outcome is ready.
     pub fn spawn(
-        model: Model,
-        estimate: Vec<Pose2>,
+        model: Model<P>,
+        estimate: Vec<P>,
         config: EngineConfig,
         polish: Polish,
         wake: Option<Waker>,
-    ) -> Job {
+    ) -> Self {
         let (ops, ops_rx) = channel::unbounded();
         let (done_tx, done) = channel::bounded(1);
         let stop = Arc::new(AtomicBool::new(false));
@@ -95,17 +96,17 @@ impl Job {
     }
 
     /// Forwards an op the foreground applied.
-    pub fn forward(&self, seq: u64, op: Op) {
+    pub fn forward(&self, seq: u64, op: Op<P>) {
         let _ = self.ops.send(Forward::Op(seq, op));
     }
 
     /// Forwards the foreground's estimate of keyframe `k`.
-    pub fn hint(&self, k: usize, pose: Pose2) {
+    pub fn hint(&self, k: usize, pose: P) {
         let _ = self.ops.send(Forward::Estimate(k, pose));
     }
 
     /// The outcome, if the re-solve has finished.
-    pub fn try_finish(&mut self) -> Option<Outcome> {
+    pub fn try_finish(&mut self) -> Option<Outcome<P>> {
         let outcome = self.done.try_recv().ok()?;
         self.join();
         Some(outcome)
@@ -131,7 +132,7 @@ impl Job {
     }
 }
 
-impl Drop for Job {
+impl<P: EnginePose> Drop for Job<P> {
     /// Stops a re-solve nobody will take (the thread is detached).
     fn drop(&mut self) {
         self.stop.store(true, Ordering::Relaxed);
@@ -143,14 +144,14 @@ const CATCH_UP_PASSES: usize = 3;
 
 /// Builds the fresh state and catches up (also used inline, with no ops).
 /// `None` when `stop` was set before the factorisation.
-pub fn run(
-    mut model: Model,
-    estimate: &[Pose2],
+pub fn run<P: EnginePose>(
+    mut model: Model<P>,
+    estimate: &[P],
     config: &EngineConfig,
     polish: Polish,
-    ops: &Receiver<Forward>,
+    ops: &Receiver<Forward<P>>,
     stop: &AtomicBool,
-) -> Option<Outcome> {
+) -> Option<Outcome<P>> {
     let start = Instant::now();
     let _span = tracing::debug_span!("resolve", keyframes = model.graph.len(), ?polish).entered();
     let joined = model.joined.clone();

@@ -8,6 +8,7 @@
 //! same without the polish) is due after `refresh_every_edges` new edges.
 //! The caller checks that the background thread is free.
 
+use super::pose::EnginePose;
 use super::state::State;
 use super::{EngineConfig, Polish};
 
@@ -35,7 +36,7 @@ impl Schedule {
     }
 
     /// Whether a re-solve is due for `state`.
-    pub fn resolve_due(&self, config: &EngineConfig, state: &State) -> bool {
+    pub fn resolve_due<P: EnginePose>(&self, config: &EngineConfig, state: &State<P>) -> bool {
         let c = config;
         let by_count = c.resolve_every_edges > 0 && self.edges_since_resolve >= c.resolve_every_edges;
         let by_fill = c.resolve_fill_ratio > 0.0
@@ -56,7 +57,7 @@ impl Schedule {
 
     /// A re-solve ([`Polish::Full`]) or a refresh ([`Polish::None`])
     /// starts from `state`.
-    pub fn started(&mut self, polish: Polish, state: &State) {
+    pub fn started<P: EnginePose>(&mut self, polish: Polish, state: &State<P>) {
         self.edges_since_refresh = 0;
         if polish != Polish::None {
             self.polished(state);
@@ -65,14 +66,14 @@ impl Schedule {
 
     /// A polished state was built inline from `state`: the re-solve
     /// schedule restarts.
-    pub fn polished(&mut self, state: &State) {
+    pub fn polished<P: EnginePose>(&mut self, state: &State<P>) {
         self.edges_since_resolve = 0;
         self.fixes_at_resolve = state.usable_fixes();
     }
 
     /// `state`, fresh from a re-solve or refresh, is current: the fill
     /// baseline is its factor.
-    pub fn fresh(&mut self, state: &State) {
+    pub fn fresh<P: EnginePose>(&mut self, state: &State<P>) {
         self.nnz_after_resolve = state.factor_nnz();
     }
 }

@@ -2,39 +2,51 @@
 
 use crate::geometry::Pose2;
 use crate::gps::{Geodetic, Georef};
-use crate::graph::{Keyframe, KeyframeId};
+use crate::graph::{Keyframe, KeyframeId, RigidMotion};
 
 /// A borrowed view of the current estimate: the poses of every keyframe
 /// linked to the gauge, with a version number and the χ² of the estimate.
 #[derive(Clone, Copy, Debug)]
-pub struct Snapshot<'a> {
+pub struct Snapshot<'a, P: RigidMotion = Pose2> {
     /// Increases by one with every [`update`](super::Engine::update).
     pub version: u64,
     /// χ² of the estimate over the applied edges, with their weights.
     pub chi2: f64,
     /// Number of completed re-solves so far.
     pub resolves: usize,
-    pub(super) keyframes: &'a [Keyframe],
+    pub(super) keyframes: &'a [Keyframe<P>],
     pub(super) joined: &'a [bool],
-    pub(super) poses: &'a [Pose2],
+    pub(super) poses: &'a [P],
     /// The map→ENU motion, once two GPS fixes have georeferenced the map.
     pub georef: Option<Georef>,
     /// The geodetic origin of the ENU frame, once known.
     pub origin: Option<Geodetic>,
 }
 
-impl<'a> Snapshot<'a> {
+impl<'a, P: RigidMotion> Snapshot<'a, P> {
     /// `(id, pose)` of every keyframe in the estimate, in arrival order.
-    pub fn poses(&self) -> impl Iterator<Item = (KeyframeId, Pose2)> + 'a {
+    pub fn poses(&self) -> impl Iterator<Item = (KeyframeId, P)> + 'a {
         let (k, j, p) = (self.keyframes, self.joined, self.poses);
         (0..k.len()).filter(move |&i| j[i]).map(move |i| (k[i].id, p[i]))
     }
 
     /// The pose of one keyframe, if it is in the estimate.
-    pub fn pose(&self, index: usize) -> Option<Pose2> {
+    pub fn pose(&self, index: usize) -> Option<P> {
         (index < self.joined.len() && self.joined[index]).then(|| self.poses[index])
     }
 
+    /// Number of keyframes in the estimate.
+    pub fn len(&self) -> usize {
+        self.joined.iter().filter(|&&j| j).count()
+    }
+
+    /// True when no keyframe is in the estimate.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}
+
+impl<'a> Snapshot<'a> {
     /// The pose of one keyframe in ENU (x east, y north, heading from
     /// east), when the map is georeferenced.
     pub fn enu_pose(&self, index: usize) -> Option<Pose2> {
@@ -47,15 +59,5 @@ impl<'a> Snapshot<'a> {
         let g = self.georef;
         self.poses()
             .filter_map(move |(id, p)| g.map(|g| (id, g.to_enu(&p))))
-    }
-
-    /// Number of keyframes in the estimate.
-    pub fn len(&self) -> usize {
-        self.joined.iter().filter(|&&j| j).count()
-    }
-
-    /// True when no keyframe is in the estimate.
-    pub fn is_empty(&self) -> bool {
-        self.len() == 0
     }
 }

@@ -10,7 +10,7 @@
 //! between the two is made here, nowhere else in the engine.
 
 use super::gauss_newton::GaussNewton;
-use super::linear_stages::LinearStages;
+use super::pose::{EnginePose, Stages};
 use super::report::FactorWork;
 use super::{EngineConfig, SnapshotSource};
 use crate::geometry::Pose2;
@@ -21,18 +21,18 @@ use crate::sparse::FactorError;
 
 /// The Gauss–Newton and two-stage systems, whichever are kept.
 #[derive(Clone, Debug)]
-pub struct Solvers {
+pub struct Solvers<P: EnginePose = Pose2> {
     source: SnapshotSource,
-    gn: Option<GaussNewton>,
-    linear: Option<LinearStages>,
+    gn: Option<GaussNewton<P>>,
+    linear: Option<P::Stages>,
     /// Per keyframe, the rigid correction from the two-stage pose to the
     /// published one (linear source).
-    offset: Vec<Pose2>,
+    offset: Vec<P>,
 }
 
-impl Solvers {
+impl<P: EnginePose> Solvers<P> {
     /// The Gauss–Newton system's linearisation point, if it is kept.
-    pub fn linearisation(&self) -> Option<&[Pose2]> {
+    pub fn linearisation(&self) -> Option<&[P]> {
         self.gn.as_ref().map(|g| g.linearisation())
     }
 
@@ -42,8 +42,8 @@ impl Solvers {
         let linear = config.linear_stages || source == SnapshotSource::Linear;
         Self {
             source,
-            gn: (source == SnapshotSource::GaussNewton).then(|| GaussNewton::new(Pose2::IDENTITY)),
-            linear: linear.then(LinearStages::new),
+            gn: (source == SnapshotSource::GaussNewton).then(|| GaussNewton::new(P::IDENTITY)),
+            linear: linear.then(P::Stages::create).flatten(),
             offset: Vec::new(),
         }
     }
@@ -53,13 +53,13 @@ impl Solvers {
     /// them with the estimate they give.
     pub fn build(
         config: &EngineConfig,
-        graph: &PoseGraph,
+        graph: &PoseGraph<P>,
         joined: &[bool],
         active: &[(usize, f64)],
-        priors: &[PositionPrior],
-        lin: Vec<Pose2>,
+        priors: &[PositionPrior<P>],
+        lin: Vec<P>,
         order: &[usize],
-    ) -> Result<(Self, Vec<Pose2>), FactorError> {
+    ) -> Result<(Self, Vec<P>), FactorError> {
         let source = config.snapshot;
         let gn = match source {
             SnapshotSource::GaussNewton => {
@@ -68,12 +68,12 @@ impl Solvers {
             SnapshotSource::Linear => None,
         };
         let linear = if config.linear_stages || source == SnapshotSource::Linear {
-            Some(LinearStages::build(graph, active, order)?)
+            Some(P::Stages::build(graph, active, order)?)
         } else {
             None
         };
         // the correction from each two-stage pose to its polished pose
-        let offset: Vec<Pose2> = (0..graph.len())
+        let offset: Vec<P> = (0..graph.len())
             .map(|k| match &linear {
                 Some(l) if joined[k] => lin[k].compose(&l.pose(k).inverse()),
                 _ => lin[0],
@@ -95,7 +95,7 @@ impl Solvers {
     /// A new keyframe slot `k` whose gauge pose is `gauge` (keyframe 0
     /// fixes the Gauss–Newton gauge there); the two-stage solution keeps
     /// its gauge at the origin.
-    pub fn push_keyframe(&mut self, k: usize, gauge: Pose2) {
+    pub fn push_keyframe(&mut self, k: usize, gauge: P) {
         self.offset.push(gauge);
         if k == 0 {
             if let Some(gn) = &mut self.gn {
@@ -107,7 +107,7 @@ impl Solvers {
     /// Keyframe `k` joins through `anchor`, at `guess`: a new keyframe
     /// carries its anchor's correction, so the new part of the map is the
     /// two-stage solution's, moved rigidly.
-    pub fn join(&mut self, k: usize, anchor: usize, guess: Pose2) {
+    pub fn join(&mut self, k: usize, anchor: usize, guess: P) {
         self.offset[k] = self.offset[anchor];
         if let Some(gn) = &mut self.gn {
             gn.add_keyframe(k, guess);
@@ -118,7 +118,7 @@ impl Solvers {
     }
 
     /// Adds `delta` times edge `e`'s terms to every system.
-    pub fn apply_edge(&mut self, e: usize, edge: &Edge, delta: f64) -> Result<(), UpdateError> {
+    pub fn apply_edge(&mut self, e: usize, edge: &Edge<P>, delta: f64) -> Result<(), UpdateError> {
         if let Some(gn) = &mut self.gn {
             gn.apply_edge(edge, delta)?;
         }
@@ -130,7 +130,7 @@ impl Solvers {
 
     /// Adds a GPS prior to the Gauss–Newton system, when kept (the
     /// two-stage system takes no priors).
-    pub fn apply_prior(&mut self, prior: &PositionPrior) -> Result<(), UpdateError> {
+    pub fn apply_prior(&mut self, prior: &PositionPrior<P>) -> Result<(), UpdateError> {
         match &mut self.gn {
             Some(gn) => gn.apply_prior(prior),
             None => Ok(()),
@@ -144,7 +144,7 @@ impl Solvers {
     }
 
     /// The Gauss–Newton system, when kept.
-    pub fn gauss_newton(&mut self) -> Option<&mut GaussNewton> {
+    pub fn gauss_newton(&mut self) -> Option<&mut GaussNewton<P>> {
         self.gn.as_mut()
     }
 
@@ -152,10 +152,10 @@ impl Solvers {
     /// `changed` and their new poses into `estimate`.
     pub fn solve(
         &mut self,
-        graph: &PoseGraph,
+        graph: &PoseGraph<P>,
         threshold: f64,
         changed: &mut Vec<usize>,
-        estimate: &mut [Pose2],
+        estimate: &mut [P],
     ) -> Result<(), UpdateError> {
         match self.source {
             SnapshotSource::GaussNewton => {
@@ -200,7 +200,7 @@ impl Solvers {
     }
 
     /// The exact two-stage solution, when kept.
-    pub fn linear_solution(&mut self, graph: &PoseGraph) -> Option<Vec<Pose2>> {
+    pub fn linear_solution(&mut self, graph: &PoseGraph<P>) -> Option<Vec<P>> {
         self.linear.as_mut().map(|l| l.solve_exact(graph))
     }
 }

@@ -8,31 +8,32 @@ use super::arrival::{ArrivalGate, Verdict};
 use super::chi2::Chi2Cache;
 pub use super::model::{EdgeState, Model};
 pub use super::op::{Op, Polish};
+use super::pose::EnginePose;
 use super::report::FactorWork;
 use super::solvers::Solvers;
 use super::{EngineConfig, EngineError};
 use crate::geometry::Pose2;
 use crate::gps::Georef;
-use crate::graph::{edge_error, Edge, EdgeKind, KeyframeId};
+use crate::graph::{Edge, EdgeKind, KeyframeId};
 use crate::outliers::OFF_BELOW;
 
 /// The model, its solvers, the estimate and its cached χ².
 #[derive(Clone, Debug)]
-pub struct State {
+pub struct State<P: EnginePose = Pose2> {
     /// Graph and bookkeeping.
-    pub model: Model,
-    solvers: Solvers,
-    estimate: Vec<Pose2>,
+    pub model: Model<P>,
+    solvers: Solvers<P>,
+    estimate: Vec<P>,
     chi2: Chi2Cache,
     /// The keyframes the last solve moved (a buffer kept between solves).
     moved: Vec<usize>,
-    gate: ArrivalGate,
+    gate: ArrivalGate<P>,
     /// While catching up: the foreground's estimate of each keyframe it
     /// had joined (see [`Self::set_hints`]).
-    hint: Vec<Option<Pose2>>,
+    hint: Vec<Option<P>>,
 }
 
-impl State {
+impl<P: EnginePose> State<P> {
     /// An empty state with the solvers `config` selects.
     pub fn new(config: &EngineConfig) -> Self {
         Self::assemble(config, Model::default(), Solvers::new(config), Vec::new())
@@ -42,9 +43,9 @@ impl State {
     /// bookkeeping starts fresh and the cached χ² is computed.
     pub(super) fn assemble(
         config: &EngineConfig,
-        model: Model,
-        solvers: Solvers,
-        estimate: Vec<Pose2>,
+        model: Model<P>,
+        solvers: Solvers<P>,
+        estimate: Vec<P>,
     ) -> Self {
         Self {
             chi2: Chi2Cache::new(&model, &estimate),
@@ -70,7 +71,7 @@ impl State {
     /// dead-reckoned from its anchor, so the edges before it are solved for
     /// first: otherwise its loop closures met hundreds of dead-reckoned
     /// keyframes and entered the factor with large errors.
-    pub fn replay(&mut self, op: &Op, threshold: f64) -> Result<(), EngineError> {
+    pub fn replay(&mut self, op: &Op<P>, threshold: f64) -> Result<(), EngineError> {
         if matches!(op, Op::Keyframe { .. }) && !self.model.pending.is_empty() {
             if self.hint.is_empty() {
                 self.solve(threshold)?;
@@ -86,7 +87,7 @@ impl State {
     /// anchor `m` takes the foreground's relative pose `F_m⁻¹ F_k`, so the
     /// new part of the map arrives in the shape the foreground's solves
     /// gave it (its loop closures applied) rather than dead-reckoned.
-    pub fn set_hints(&mut self, estimate: &[Pose2], joined: &[bool]) {
+    pub fn set_hints(&mut self, estimate: &[P], joined: &[bool]) {
         self.hint = (estimate.iter().zip(joined))
             .map(|(&p, &j)| j.then_some(p))
             .collect();
@@ -94,7 +95,7 @@ impl State {
 
     /// The foreground's estimate of keyframe `k`, forwarded during a
     /// catch-up.
-    pub fn hint(&mut self, k: usize, pose: Pose2) {
+    pub fn hint(&mut self, k: usize, pose: P) {
         if self.hint.len() <= k {
             self.hint.resize(k + 1, None);
         }
@@ -113,13 +114,13 @@ impl State {
     }
 
     /// Applies one change. Nothing is stored when it is rejected.
-    pub fn apply(&mut self, op: &Op) -> Result<(), EngineError> {
+    pub fn apply(&mut self, op: &Op<P>) -> Result<(), EngineError> {
         match op {
             Op::Keyframe { id, guess } => {
                 let k = self.model.graph.add_keyframe(*id, *guess)?;
                 self.model.joined.push(false);
                 self.model.incident.push(Vec::new());
-                let gauge = guess.unwrap_or(Pose2::IDENTITY);
+                let gauge = guess.unwrap_or(P::IDENTITY);
                 self.estimate.push(gauge);
                 self.solvers.push_keyframe(k, gauge);
                 if k == 0 {
@@ -300,7 +301,7 @@ impl State {
     /// The switch new loop closure `e`, between joined keyframes, enters
     /// with ([`ArrivalGate`]); a run of vouched rejections restores its
     /// earlier members.
-    fn arrival_switch(&mut self, e: usize, edge: &Edge) -> Result<f64, EngineError> {
+    fn arrival_switch(&mut self, e: usize, edge: &Edge<P>) -> Result<f64, EngineError> {
         let (xi, xj) = (self.estimate[edge.from], self.estimate[edge.to]);
         let s = self.gate.switch(edge, &xi, &xj);
         if !self.gate.judges(s) {
@@ -324,8 +325,8 @@ impl State {
     /// Whether loop closure `edge`'s error at the estimate is within
     /// `arrival_phi` of its innovation covariance `Ω⁻¹ + σ² J Σ Jᵀ`
     /// ([`GaussNewton::innovation_chi2`](super::gauss_newton::GaussNewton::innovation_chi2); `σ²`: [`Self::variance_factor`]).
-    fn within_innovation(&mut self, edge: &Edge) -> Result<bool, EngineError> {
-        let e = edge_error(edge, &self.estimate[edge.from], &self.estimate[edge.to]);
+    fn within_innovation(&mut self, edge: &Edge<P>) -> Result<bool, EngineError> {
+        let e = P::edge_error(edge, &self.estimate[edge.from], &self.estimate[edge.to]);
         let factor = self.variance_factor();
         let phi = self.gate.phi();
         let Some(gn) = self.solvers.gauss_newton() else {
@@ -353,7 +354,7 @@ impl State {
     }
 
     /// The a-posteriori variance factor `χ² / r` of the estimate (`r`: the
-    /// redundancy, three per applied edge less three per keyframe past the
+    /// redundancy, `DOF` per applied edge less `DOF` per keyframe past the
     /// gauge), within [10⁻³, 1]; 1 while `r < 30`.
     fn variance_factor(&self) -> f64 {
         let m = &self.model;
@@ -361,7 +362,8 @@ impl State {
             .filter(|&e| m.edges[e].applied && m.weight(e) > 0.0)
             .count();
         let keyframes = m.joined.iter().filter(|&&j| j).count();
-        let r = 3 * edges as i64 - 3 * (keyframes as i64 - 1);
+        let dof = P::DOF as i64;
+        let r = dof * edges as i64 - dof * (keyframes as i64 - 1);
         if r < 30 {
             1.0
         } else {
@@ -370,7 +372,7 @@ impl State {
     }
 
     /// Keyframe `k` joins through an edge from `anchor`, at `guess`.
-    fn join(&mut self, k: usize, anchor: usize, guess: Pose2) {
+    fn join(&mut self, k: usize, anchor: usize, guess: P) {
         self.model.joined[k] = true;
         self.estimate[k] = guess;
         self.solvers.join(k, anchor, guess);
@@ -423,7 +425,7 @@ impl State {
     }
 
     /// The estimate of every keyframe slot (meaningful where joined).
-    pub fn estimate(&self) -> &[Pose2] {
+    pub fn estimate(&self) -> &[P] {
         &self.estimate
     }
 
@@ -431,7 +433,7 @@ impl State {
     /// else (the linear source) the estimate itself. Indexed like the
     /// keyframes, but it may end at the newest joined one: a newer
     /// keyframe no edge has connected yet has no linearisation point.
-    pub fn linearisation(&self) -> &[Pose2] {
+    pub fn linearisation(&self) -> &[P] {
         self.solvers.linearisation().unwrap_or(&self.estimate)
     }
 
@@ -453,12 +455,12 @@ impl State {
     }
 
     /// The exact two-stage solution, when kept.
-    pub fn linear_solution(&mut self) -> Option<Vec<Pose2>> {
+    pub fn linear_solution(&mut self) -> Option<Vec<P>> {
         self.solvers.linear_solution(&self.model.graph)
     }
 
     /// A copy of the model, for a rebuild elsewhere.
-    pub fn model(&self) -> &Model {
+    pub fn model(&self) -> &Model<P> {
         &self.model
     }
 }

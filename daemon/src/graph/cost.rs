@@ -9,7 +9,7 @@ use crate::geometry::{wrap_angle, Pose2};
 use num_complex::Complex64;
 
 /// A pose type whose edges have an error vector and a χ²: g2o's cost in
-/// each dimension (SE(2) here, SE(3) in [`super::cost3`]).
+/// each dimension (SE(2) in this module, SE(3) in `cost3`).
 pub trait EdgeCost: RigidMotion {
     /// The error vector, `DOF` numbers.
     type Error: Copy + std::fmt::Debug + AsRef<[f64]>;
@@ -17,6 +17,10 @@ pub trait EdgeCost: RigidMotion {
     fn edge_error(edge: &Edge<Self>, xi: &Self, xj: &Self) -> Self::Error;
     /// `eᵀ Ω e`.
     fn mahalanobis(information: &Self::Information, e: &Self::Error) -> f64;
+    /// The motion's own coordinates in the error's form (`t2v`: `(x, y, θ)`
+    /// in the plane, `[t, q_xyz]` with `w ≥ 0` in space), so that the error
+    /// of `Z` against `X` is `(Z⁻¹ X).vector()`.
+    fn vector(&self) -> Self::Error;
 }
 
 impl EdgeCost for Pose2 {
@@ -26,6 +30,9 @@ impl EdgeCost for Pose2 {
     }
     fn mahalanobis(information: &super::Information, e: &[f64; 3]) -> f64 {
         information.mahalanobis(e)
+    }
+    fn vector(&self) -> [f64; 3] {
+        self.to_array()
     }
 }
 

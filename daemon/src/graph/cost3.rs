@@ -54,6 +54,10 @@ impl EdgeCost for Pose3 {
     fn mahalanobis(information: &Information6, e: &[f64; 6]) -> f64 {
         information.mahalanobis(e)
     }
+    fn vector(&self) -> [f64; 6] {
+        let (t, q) = (&self.translation, self.canonical_quaternion());
+        [t.x, t.y, t.z, q.i, q.j, q.k]
+    }
 }
 
 #[cfg(test)]

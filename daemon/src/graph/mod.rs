@@ -15,7 +15,7 @@ use slamd_types::EdgeInput;
 pub use slamd_types::{EdgeKind, Information, Information6, InformationError, KeyframeId, Pose3};
 
 use crate::geometry::Pose2;
-pub use slamd_types::RigidMotion;
+pub use slamd_types::{InformationMatrix, RigidMotion};
 use std::collections::{HashMap, VecDeque};
 use std::fmt;
 
@@ -81,7 +81,7 @@ pub struct Keyframe<P: RigidMotion = Pose2> {
 /// Keyframes plus edges, with a map from ids to indices.
 ///
 /// `P` is the pose type: [`Pose2`] for planar graphs (the default),
-/// [`Pose3`](slamd_types::Pose3) for spatial ones.
+/// [`Pose3`] for spatial ones.
 #[derive(Clone, Debug, Default)]
 pub struct PoseGraph<P: RigidMotion = Pose2> {
     keyframes: Vec<Keyframe<P>>,
@@ -89,9 +89,9 @@ pub struct PoseGraph<P: RigidMotion = Pose2> {
     edges: Vec<Edge<P>>,
 }
 
-impl PoseGraph {
+impl<P: RigidMotion> PoseGraph<P> {
     /// Edge `e` as a frontend sends it (keyframe ids, not indices).
-    pub fn edge_input(&self, e: usize) -> EdgeInput {
+    pub fn edge_input(&self, e: usize) -> EdgeInput<P> {
         let edge = self.edges[e];
         EdgeInput::new(
             self.id_of(edge.from),

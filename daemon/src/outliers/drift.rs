@@ -20,40 +20,41 @@
 //! gate, `arrival_covariance`); the run names its members for that.
 
 use crate::geometry::Pose2;
-use crate::graph::Edge;
+use crate::graph::{Edge, EdgeCost};
 
 /// Keyframes a run may skip between two of its loop closures.
 pub const RUN_GAP: usize = 50;
 
 /// The current run of agreeing rejected loop closures.
-#[derive(Clone, Debug, Default)]
-pub struct DriftRun {
+#[derive(Clone, Debug)]
+pub struct DriftRun<P = Pose2> {
     /// The newer keyframe and the correction of the run's last member.
-    last: Option<(usize, Pose2)>,
+    last: Option<(usize, P)>,
     /// The run's loop closures (edge index, and whether the caller vouched
     /// for it), oldest first.
     members: Vec<(usize, bool)>,
 }
 
-impl DriftRun {
+impl<P> Default for DriftRun<P> {
+    fn default() -> Self {
+        Self {
+            last: None,
+            members: Vec::new(),
+        }
+    }
+}
+
+impl<P: EdgeCost> DriftRun<P> {
     /// Records that loop closure `e`, `edge` (between keyframes at `xi`,
     /// `xj`), was switched off on arrival, and whether the caller `vouched`
     /// for it. Returns the length of the run it now belongs to.
-    pub fn rejected(
-        &mut self,
-        e: usize,
-        vouched: bool,
-        edge: &Edge,
-        xi: &Pose2,
-        xj: &Pose2,
-        phi: f64,
-    ) -> usize {
+    pub fn rejected(&mut self, e: usize, vouched: bool, edge: &Edge<P>, xi: &P, xj: &P, phi: f64) -> usize {
         let newer = edge.from.max(edge.to);
         let implied = xi.compose(&edge.measurement);
         let correction = implied.compose(&xj.inverse());
         let agrees = self.last.is_some_and(|(k, previous)| {
-            let e = previous.compose(xj).between(&implied).to_array();
-            newer.abs_diff(k) <= RUN_GAP && edge.information.mahalanobis(&e) <= phi
+            let e = previous.compose(xj).between(&implied).vector();
+            newer.abs_diff(k) <= RUN_GAP && P::mahalanobis(&edge.information, &e) <= phi
         });
         if !agrees {
             self.members.clear();

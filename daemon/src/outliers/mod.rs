@@ -140,14 +140,24 @@ impl OutlierConfig {
     }
 
     /// The switch a new loop closure enters with, at poses `xi`, `xj`.
-    pub fn arrival_switch(
-        &self,
-        edge: &Edge,
-        xi: &crate::geometry::Pose2,
-        xj: &crate::geometry::Pose2,
-    ) -> f64 {
-        let e = crate::graph::edge_error(edge, xi, xj);
-        dcs(edge.information.mahalanobis(&e), self.arrival_phi)
+    pub fn arrival_switch<P: crate::graph::EdgeCost>(&self, edge: &Edge<P>, xi: &P, xj: &P) -> f64 {
+        let e = P::edge_error(edge, xi, xj);
+        dcs(P::mahalanobis(&edge.information, &e), self.arrival_phi)
+    }
+
+    /// This configuration for edges of `dof` degrees of freedom: the
+    /// kernel's Φ and `arrival_phi`, where they are the defaults (set for
+    /// three), move to the same quantiles at six (χ²₆(0.999) = 22.458).
+    pub fn for_dof(mut self, dof: usize) -> Self {
+        if dof == 6 {
+            if self.kernel == Kernel::default() {
+                self.kernel = Kernel::default_for(6);
+            }
+            if self.arrival_phi == Self::default().arrival_phi {
+                self.arrival_phi = 22.458;
+            }
+        }
+        self
     }
 
     /// Whether `edge` gets a switch: every edge but odometry and trusted

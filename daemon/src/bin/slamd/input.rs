@@ -44,17 +44,6 @@ impl Input<AnyGraph> {
     }
 }
 
-impl Input {
-    /// Reads `path` as `opts` say; skipped lines are reported on stderr
-    /// unless `quiet`.
-    pub fn read(path: &Path, opts: InputOpts, quiet: bool) -> Result<Self, ReadError> {
-        let (graph, skipped) = io::read_graph_with(path, on_invalid(opts))?;
-        let input = Self { graph, skipped };
-        input.report(path, quiet);
-        Ok(input)
-    }
-}
-
 impl<G> Input<G> {
     /// Reports the skipped lines on stderr unless `quiet`.
     fn report(&self, path: &Path, quiet: bool) {

@@ -1,4 +1,5 @@
-//! [`Marginal`]: `Vᵀ A⁻¹ V` for three sparse vectors, read off the factor.
+//! [`Marginal`]: `Vᵀ A⁻¹ V` for up to six sparse vectors, read off the
+//! factor.
 //!
 //! With `A = L D Lᵀ`, `Vᵀ A⁻¹ V = Yᵀ D⁻¹ Y` where `Y = L⁻¹ V`. The pattern
 //! of `Y` is the union of the elimination-tree paths from the nonzeros of
@@ -8,25 +9,31 @@
 //! for the covariance `J Σ Jᵀ` of an edge's predicted error (`Σ = H⁻¹`).
 
 use super::DynamicLdlt;
-use nalgebra::Matrix3;
+use nalgebra::Matrix6;
+
+/// Most vectors one [`Marginal::form`] takes: a 3-D pose's degrees of
+/// freedom.
+pub const MAX_VECTORS: usize = 6;
 
 /// Scratch for [`Marginal::form`], kept between calls (dense per column,
 /// zero outside a call).
 #[derive(Clone, Debug, Default)]
 pub struct Marginal {
-    y: Vec<[f64; 3]>,
+    y: Vec<[f64; MAX_VECTORS]>,
     on_path: Vec<bool>,
     path: Vec<usize>,
 }
 
 impl Marginal {
     /// `Vᵀ A⁻¹ V`, where `v[r]` lists the nonzeros `(column, value)` of
-    /// vector `r`. `None` when a pivot on the path is zero while `Y` is not
-    /// (a variable with no weight: infinite variance).
-    pub fn form(&mut self, factor: &DynamicLdlt<f64>, v: [&[(usize, f64)]; 3]) -> Option<Matrix3<f64>> {
-        let n = factor.len();
+    /// vector `r` (at most `MAX_VECTORS`, six); the result fills the top-left
+    /// `v.len()` square. `None` when a pivot on the path is zero while `Y`
+    /// is not (a variable with no weight: infinite variance).
+    pub fn form(&mut self, factor: &DynamicLdlt<f64>, v: &[&[(usize, f64)]]) -> Option<Matrix6<f64>> {
+        assert!(v.len() <= MAX_VECTORS, "at most {MAX_VECTORS} vectors");
+        let (n, m) = (factor.len(), v.len());
         if self.y.len() < n {
-            self.y.resize(n, [0.0; 3]);
+            self.y.resize(n, [0.0; MAX_VECTORS]);
             self.on_path.resize(n, false);
         }
         self.path.clear();
@@ -42,10 +49,10 @@ impl Marginal {
             }
         }
         self.path.sort_unstable();
-        let mut form = Some(Matrix3::zeros());
+        let mut form = Some(Matrix6::zeros());
         for &j in &self.path {
             let y = self.y[j];
-            if y == [0.0; 3] {
+            if y[..m].iter().all(|&v| v == 0.0) {
                 continue;
             }
             let d = factor.d(j);
@@ -53,24 +60,24 @@ impl Marginal {
                 form = None;
                 break;
             }
-            if let Some(m) = form.as_mut() {
-                for a in 0..3 {
-                    for b in 0..3 {
-                        m[(a, b)] += y[a] * y[b] / d;
+            if let Some(f) = form.as_mut() {
+                for a in 0..m {
+                    for b in 0..m {
+                        f[(a, b)] += y[a] * y[b] / d;
                     }
                 }
             }
             let (rows, vals) = factor.column(j);
             for (&i, &l) in rows.iter().zip(vals) {
                 let yi = &mut self.y[i as usize];
-                for r in 0..3 {
+                for r in 0..m {
                     yi[r] -= l * y[r];
                 }
             }
         }
         // every row written is an ancestor of a path column, so on the path
         for &j in &self.path {
-            self.y[j] = [0.0; 3];
+            self.y[j] = [0.0; MAX_VECTORS];
             self.on_path[j] = false;
         }
         form

@@ -13,7 +13,7 @@
 //!   where the updates carry the right-hand side and the forward solve rides
 //!   along their walks (the Gauss–Newton system, whose `b` changes only with
 //!   its updates);
-//! - [`Marginal`] reads `Vᵀ A⁻¹ V` for three sparse vectors off the paths
+//! - [`Marginal`] reads `Vᵀ A⁻¹ V` for a pose's sparse vectors off the paths
 //!   of their columns (an edge's predicted-error covariance).
 //!
 //! Columns are stored one per `Vec` (rows sorted, strictly below the

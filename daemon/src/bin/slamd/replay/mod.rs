@@ -15,7 +15,7 @@ use faer::c64;
 use slamd::config::Config;
 use slamd::engine::{EdgeInput, Engine, EngineConfig, FactorWork, FixInput};
 use slamd::geometry::Pose2;
-use slamd::graph::{chi2, KeyframeId, PoseGraph};
+use slamd::graph::{chi2, KeyframeId, PoseGraph, RigidMotion};
 use slamd::io;
 use slamd::solver::{solve_batch, BatchOptions};
 use std::collections::HashMap;
@@ -23,7 +23,8 @@ use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 mod sink;
-pub use sink::{DaemonSink, EmbeddedSink, Sink};
+mod spatial;
+pub use sink::{DaemonSink, EmbeddedSink, ReplayPose, Sink};
 
 #[derive(Args, Debug)]
 pub struct ReplayOpts {
@@ -100,10 +101,10 @@ impl Latency {
 }
 
 /// One keyframe of a replay, with what arrives with it.
-pub struct Step {
+pub struct Step<P: RigidMotion = Pose2> {
     pub id: KeyframeId,
     /// The edges whose newer end it is.
-    pub edges: Vec<EdgeInput>,
+    pub edges: Vec<EdgeInput<P>>,
     /// Their indices in the graph (file order).
     pub file_index: Vec<usize>,
     /// The GPS fixes taken at it.
@@ -112,13 +113,13 @@ pub struct Step {
 
 /// A graph's keyframes in order, each with the edges that it makes
 /// available (its newer end) and its fixes, as engine inputs.
-pub fn stream(graph: &PoseGraph, fixes: &[FixInput]) -> Vec<Step> {
+pub fn stream<P: RigidMotion>(graph: &PoseGraph<P>, fixes: &[FixInput]) -> Vec<Step<P>> {
     let mut by_id: HashMap<KeyframeId, Vec<FixInput>> = HashMap::new();
     for f in fixes {
         by_id.entry(f.keyframe).or_default().push(*f);
     }
     let index = graph.by_newer();
-    let groups: Vec<Vec<EdgeInput>> = index
+    let groups: Vec<Vec<EdgeInput<P>>> = index
         .iter()
         .map(|g| g.iter().map(|&e| graph.edge_input(e)).collect())
         .collect();
@@ -139,7 +140,7 @@ pub fn stream(graph: &PoseGraph, fixes: &[FixInput]) -> Vec<Step> {
 }
 
 /// What a replay measured.
-pub struct Outcome {
+pub struct Outcome<P = Pose2> {
     pub latencies: Vec<f64>,
     /// Georeferenced (east, north) of the final estimate, by keyframe id.
     pub enu: HashMap<KeyframeId, c64>,
@@ -152,21 +153,21 @@ pub struct Outcome {
     /// closing estimate (the re-solve that ends the stream).
     pub closing_s: f64,
     pub resolves: usize,
-    pub poses: Vec<Pose2>,
-    pub checked: Vec<(usize, Vec<Pose2>)>,
+    pub poses: Vec<P>,
+    pub checked: Vec<(usize, Vec<P>)>,
     /// The final switch of each edge, in file order (embedded only).
     pub switches: Option<Vec<f64>>,
 }
 
 /// Streams `graph` into `sink`; `progress` is told of each keyframe.
-pub fn replay(
-    graph: &PoseGraph,
+pub fn replay<P: RigidMotion>(
+    graph: &PoseGraph<P>,
     fixes: &[FixInput],
-    sink: &mut dyn Sink,
+    sink: &mut dyn Sink<P>,
     checkpoints: &[usize],
     record_work: bool,
     mut progress: impl FnMut(usize),
-) -> anyhow::Result<Outcome> {
+) -> anyhow::Result<Outcome<P>> {
     let mut latencies = Vec::with_capacity(graph.len());
     let mut work = Vec::new();
     let mut before = FactorWork::default();
@@ -233,9 +234,12 @@ pub fn replay(
 
 pub fn run(opts: ReplayOpts) -> anyhow::Result<()> {
     let config = crate::run::load_config(opts.config.as_deref(), opts.namespace.as_deref())?;
-    let input = crate::input::Input::read(&opts.file, opts.input, opts.json)?;
+    let input = crate::input::Input::read_any(&opts.file, opts.input, opts.json)?;
     let skipped = input.json();
-    let graph = input.graph;
+    let graph = match input.graph {
+        io::AnyGraph::Planar(g) => g,
+        io::AnyGraph::Spatial(g) => return spatial::run(&opts, &config, g, skipped),
+    };
     graph.check_connected()?;
     let truth = opts
         .ground_truth
@@ -385,7 +389,7 @@ pub fn run(opts: ReplayOpts) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn engine_config(opts: &ReplayOpts, config: &Config) -> EngineConfig {
+pub fn engine_config(opts: &ReplayOpts, config: &Config) -> EngineConfig {
     let mut c = config.engine();
     if let Some(o) = opts.gps.gps_origin {
         c.gps.origin = Some(o);

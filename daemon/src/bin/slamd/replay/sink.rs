@@ -4,25 +4,25 @@
 use super::Step;
 use faer::c64;
 use slamd::config::Config;
-use slamd::engine::{Engine, EngineStats};
+use slamd::engine::{Engine, EnginePose, EngineStats, FixInput};
 use slamd::geometry::Pose2;
-use slamd::graph::KeyframeId;
+use slamd::graph::{KeyframeId, Pose3};
 use slamd::ipc::{Frontend, Snapshots};
 use std::collections::{HashMap, VecDeque};
 use std::time::{Duration, Instant};
 
 /// Where a replay sends its keyframes.
-pub trait Sink {
+pub trait Sink<P: slamd::graph::RigidMotion = Pose2> {
     /// Sends keyframe `k` with its edges and fixes; returns latencies (µs)
     /// of the keyframes whose snapshot arrived meanwhile, with their index.
-    fn keyframe(&mut self, k: usize, step: &Step) -> anyhow::Result<Vec<(usize, f64)>>;
+    fn keyframe(&mut self, k: usize, step: &Step<P>) -> anyhow::Result<Vec<(usize, f64)>>;
     /// Waits for every outstanding snapshot; returns their latencies.
     fn drain(&mut self) -> anyhow::Result<Vec<(usize, f64)>>;
     /// The current estimate, by keyframe id.
-    fn poses(&mut self) -> anyhow::Result<HashMap<KeyframeId, Pose2>>;
+    fn poses(&mut self) -> anyhow::Result<HashMap<KeyframeId, P>>;
     /// The final estimate after the re-solve that ends the stream, the
     /// number of re-solves, and when that estimate was ready.
-    fn finish(&mut self) -> anyhow::Result<(HashMap<KeyframeId, Pose2>, usize, Instant)>;
+    fn finish(&mut self) -> anyhow::Result<(HashMap<KeyframeId, P>, usize, Instant)>;
     /// The georeferenced (east, north) of each keyframe; empty until GPS
     /// has georeferenced the map.
     fn enu(&mut self) -> anyhow::Result<HashMap<KeyframeId, c64>>;
@@ -38,18 +38,49 @@ pub trait Sink {
 }
 
 /// The engine in this process.
-pub struct EmbeddedSink(pub Engine);
+pub struct EmbeddedSink<P: EnginePose = Pose2>(pub Engine<P>);
 
-impl Sink for EmbeddedSink {
-    fn keyframe(&mut self, k: usize, step: &Step) -> anyhow::Result<Vec<(usize, f64)>> {
+/// What an embedded replay does per dimension: GPS is planar.
+pub trait ReplayPose: EnginePose {
+    /// Hands the engine `fixes`.
+    fn add_fixes(engine: &mut Engine<Self>, fixes: &[FixInput]) -> anyhow::Result<()>;
+    /// The georeferenced (east, north) of every keyframe, once georeferenced.
+    fn enu(engine: &Engine<Self>) -> HashMap<KeyframeId, c64>;
+}
+
+impl ReplayPose for Pose2 {
+    fn add_fixes(engine: &mut Engine, fixes: &[FixInput]) -> anyhow::Result<()> {
+        for f in fixes {
+            engine.add_gps(*f)?;
+        }
+        Ok(())
+    }
+    fn enu(engine: &Engine) -> HashMap<KeyframeId, c64> {
+        let snap = engine.snapshot();
+        snap.enu_poses().map(|(id, p)| (id, p.position())).collect()
+    }
+}
+
+impl ReplayPose for Pose3 {
+    fn add_fixes(_: &mut Engine<Pose3>, fixes: &[FixInput]) -> anyhow::Result<()> {
+        match fixes.is_empty() {
+            true => Ok(()),
+            false => anyhow::bail!("GPS fixes are not available for 3-D graphs"),
+        }
+    }
+    fn enu(_: &Engine<Pose3>) -> HashMap<KeyframeId, c64> {
+        HashMap::new()
+    }
+}
+
+impl<P: ReplayPose> Sink<P> for EmbeddedSink<P> {
+    fn keyframe(&mut self, k: usize, step: &Step<P>) -> anyhow::Result<Vec<(usize, f64)>> {
         self.0.add_keyframe(step.id, None)?;
         let arrival = Instant::now();
         for e in &step.edges {
             self.0.add_edge(*e)?;
         }
-        for f in &step.fixes {
-            self.0.add_gps(*f)?;
-        }
+        P::add_fixes(&mut self.0, &step.fixes)?;
         self.0.update();
         Ok(if step.edges.is_empty() {
             vec![]
@@ -62,18 +93,17 @@ impl Sink for EmbeddedSink {
         Ok(vec![])
     }
 
-    fn poses(&mut self) -> anyhow::Result<HashMap<KeyframeId, Pose2>> {
+    fn poses(&mut self) -> anyhow::Result<HashMap<KeyframeId, P>> {
         Ok(self.0.snapshot().poses().collect())
     }
 
-    fn finish(&mut self) -> anyhow::Result<(HashMap<KeyframeId, Pose2>, usize, Instant)> {
+    fn finish(&mut self) -> anyhow::Result<(HashMap<KeyframeId, P>, usize, Instant)> {
         self.0.resolve_now();
         Ok((self.poses()?, self.0.stats().resolves, Instant::now()))
     }
 
     fn enu(&mut self) -> anyhow::Result<HashMap<KeyframeId, c64>> {
-        let snap = self.0.snapshot();
-        Ok(snap.enu_poses().map(|(id, p)| (id, p.position())).collect())
+        Ok(P::enu(&self.0))
     }
 
     fn switches(&mut self) -> Option<Vec<f64>> {

@@ -205,7 +205,8 @@ proptest! {
     fn marginal_form_matches_the_dense_inverse(
         n in 3usize..30,
         seed in prop::collection::vec((0usize..40, 0usize..40, -1.0..1.0f64), 0..40),
-        v in prop::collection::vec((0usize..40, 0usize..3, -2.0..2.0f64), 1..9),
+        v in prop::collection::vec((0usize..40, 0usize..6, -2.0..2.0f64), 1..15),
+        m in 1usize..=6,
         p in any::<u64>(),
     ) {
         let seed: Vec<_> = seed.iter().map(|&(i, j, a)| (i, j, a, 0.0)).collect();
@@ -222,19 +223,21 @@ proptest! {
                 dense[(perm[c], perm[d])] += c64::new(wc * wd, 0.0);
             }
         }
-        let mut vectors: [Vec<(usize, f64)>; 3] = Default::default();
-        let mut dense_v = DMatrix::<c64>::zeros(n, 3);
+        // m vectors, as many as a pose's degrees of freedom
+        let mut vectors: Vec<Vec<(usize, f64)>> = vec![Vec::new(); m];
+        let mut dense_v = DMatrix::<c64>::zeros(n, m);
         for &(i, r, x) in &v {
-            let c = i % n;
+            let (c, r) = (i % n, r % m);
             if vectors[r].iter().all(|&(k, _)| k != c) {
                 vectors[r].push((c, x));
                 dense_v[(perm[c], r)] = c64::new(x, 0.0);
             }
         }
-        let got = Marginal::default().form(&f, [&vectors[0], &vectors[1], &vectors[2]]).unwrap();
+        let slices: Vec<&[(usize, f64)]> = vectors.iter().map(|v| &v[..]).collect();
+        let got = Marginal::default().form(&f, &slices).unwrap();
         let want = dense_v.adjoint() * dense.try_inverse().unwrap() * &dense_v;
-        for r in 0..3 {
-            for s in 0..3 {
+        for r in 0..m {
+            for s in 0..m {
                 let scale = want[(r, r)].re.abs().max(want[(s, s)].re.abs()).max(1.0);
                 prop_assert!((got[(r, s)] - want[(r, s)].re).abs() <= 1e-9 * scale, "{r},{s}: {} vs {}", got[(r, s)], want[(r, s)].re);
             }

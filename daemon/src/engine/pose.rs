@@ -1,0 +1,386 @@
+//! [`EnginePose`]: what the incremental engine needs of a pose type beyond
+//! the polish's [`LiePose`], so that one engine serves SE(2) and SE(3).
+//!
+//! Each item is either the same math written for one dimension (the
+//! whitened rows of an edge, its innovation test, the linear initialiser a
+//! re-solve starts from) or a feature only the plane has so far (the
+//! two-stage incremental system, GPS, the cycle test and PCM), which the
+//! spatial pose declines: its configuration check refuses them, so they
+//! are never asked for.
+
+use super::linear_stages::LinearStages;
+use super::model::Model;
+use super::EngineConfig;
+use crate::geometry::{Pose2, Turns};
+use crate::gps::{Georef, GpsConfig, GpsFix};
+use crate::graph::{edge_error_turned, Edge, Pose3, PoseGraph};
+use crate::linear::{chordal, two_stage};
+use crate::nonlinear::{se2, se3, LevenbergMarquardtParams, LiePose, PositionPrior};
+use crate::outliers::consistency::ConsistencyGraph;
+use crate::outliers::{cycles, OutlierConfig};
+use crate::sparse::dynamic::UpdateError;
+use crate::sparse::FactorError;
+use nalgebra::{Matrix3, Matrix6, SMatrix, Vector2, Vector3, Vector6};
+use std::ops::Index;
+use std::sync::Mutex;
+
+/// A pose type the engine can run on.
+pub trait EnginePose: LiePose {
+    /// `Lᵀ J`, `DOF × 2·DOF`, with `Ω = L Lᵀ`.
+    type Rows: Index<(usize, usize), Output = f64>;
+    /// `−Lᵀ e`, `DOF` long.
+    type Tails: Index<usize, Output = f64>;
+    /// `J`, `DOF × 2·DOF`.
+    type Jacobian: Index<(usize, usize), Output = f64>;
+    /// The incremental two-stage system, where the dimension has one.
+    type Stages: Stages<Self>;
+
+    /// The edge's whitened rows and tails at `xi`, `xj`: its terms in the
+    /// normal equations are `Σ_r [rows_r | tail_r]ᵀ [rows_r | tail_r]`.
+    fn whitened(edge: &Edge<Self>, xi: &Self, xj: &Self) -> (Self::Rows, Self::Tails);
+
+    /// The edge's Jacobian at `xi`, `xj`.
+    fn jacobian(edge: &Edge<Self>, xi: &Self, xj: &Self) -> Self::Jacobian;
+
+    /// The whitened rows of a position prior at this pose, over the pose's
+    /// own `DOF` variables (local column, value), with their tails.
+    fn prior_rows(&self, prior: &PositionPrior<Self>) -> Vec<(Vec<(usize, f64)>, f64)>;
+
+    /// `eᵀ S⁻¹ e` with `S = Ω⁻¹ + σ² J Σ Jᵀ`, given `J Σ Jᵀ` in the top-left
+    /// `DOF` square of `jsj`; `None` when `S` is not positive definite.
+    fn innovation_chi2(
+        information: &Self::Information,
+        e: &Self::Error,
+        jsj: &Matrix6<f64>,
+        variance_factor: f64,
+    ) -> Option<f64>;
+
+    /// `eᵀ Ω e` of edge `e` at `estimate`, with whatever the caches keep.
+    fn cached_chi2(
+        turns: &mut Turns,
+        measured: &mut Turns,
+        e: usize,
+        edge: &Edge<Self>,
+        estimate: &[Self],
+    ) -> f64;
+
+    /// The linear initialiser's solution of `graph` (gauge at the
+    /// identity): a re-solve's start that does not depend on the estimate.
+    fn linear_solution(graph: &PoseGraph<Self>) -> Option<Vec<Self>>;
+
+    /// The switchable edges paper A's cycle test rejects (planar only).
+    fn cycle_rejected(
+        n: usize,
+        edges: &[Edge<Self>],
+        switchable: &[bool],
+        config: &OutlierConfig,
+    ) -> Vec<bool>;
+
+    /// The edges `ids` PCM holds out (planar only).
+    fn pairwise_held_out(
+        consistency: &Mutex<ConsistencyGraph>,
+        graph: &PoseGraph<Self>,
+        filter: &OutlierConfig,
+        ids: &[usize],
+        switchable: &[bool],
+    ) -> Vec<bool>;
+
+    /// A GPS fix's prior under `georef` (planar only).
+    fn gps_prior(fix: &GpsFix, georef: &Georef, weight: f64) -> Option<PositionPrior<Self>>;
+
+    /// Georeferences the model's fixes onto `poses` (planar only).
+    fn georeference(
+        model: &mut Model<Self>,
+        config: &GpsConfig,
+        edges: &[Edge<Self>],
+        compact: &[usize],
+        poses: &mut Vec<Self>,
+        params: &LevenbergMarquardtParams,
+    );
+
+    /// Why `config` cannot run on this dimension, if it cannot.
+    fn check(config: &EngineConfig) -> Result<(), String>;
+}
+
+/// The incremental two-stage system of one dimension (see
+/// [`LinearStages`]).
+pub trait Stages<P: EnginePose>: Clone + std::fmt::Debug + Send + Sync + Sized + 'static {
+    /// An empty system, where the dimension has one.
+    fn create() -> Option<Self>;
+    /// A fresh factorisation over `edges` (index, weight) in `order`.
+    fn build(graph: &PoseGraph<P>, edges: &[(usize, f64)], order: &[usize]) -> Result<Self, FactorError>;
+    /// Keyframe `k` joins.
+    fn add_keyframe(&mut self, k: usize);
+    /// Adds `delta` times edge `index`'s rows.
+    fn apply_edge(&mut self, index: usize, edge: &Edge<P>, delta: f64) -> Result<(), UpdateError>;
+    /// The exact solution of everything so far.
+    fn solve_exact(&mut self, graph: &PoseGraph<P>) -> Vec<P>;
+    /// Solves, returning the keyframes whose pose moved past `threshold`.
+    fn solve(&mut self, graph: &PoseGraph<P>, threshold: f64) -> &[usize];
+    /// Stored entries of the factors.
+    fn factor_nnz(&self) -> usize;
+    /// Keyframe `k`'s pose.
+    fn pose(&self, k: usize) -> P;
+}
+
+impl Stages<Pose2> for LinearStages {
+    fn create() -> Option<Self> {
+        Some(LinearStages::new())
+    }
+    fn build(graph: &PoseGraph, edges: &[(usize, f64)], order: &[usize]) -> Result<Self, FactorError> {
+        LinearStages::build(graph, edges, order)
+    }
+    fn add_keyframe(&mut self, k: usize) {
+        LinearStages::add_keyframe(self, k)
+    }
+    fn apply_edge(&mut self, index: usize, edge: &Edge, delta: f64) -> Result<(), UpdateError> {
+        LinearStages::apply_edge(self, index, edge, delta)
+    }
+    fn solve_exact(&mut self, graph: &PoseGraph) -> Vec<Pose2> {
+        LinearStages::solve_exact(self, graph)
+    }
+    fn solve(&mut self, graph: &PoseGraph, threshold: f64) -> &[usize] {
+        LinearStages::solve(self, graph, threshold)
+    }
+    fn factor_nnz(&self) -> usize {
+        LinearStages::factor_nnz(self)
+    }
+    fn pose(&self, k: usize) -> Pose2 {
+        LinearStages::pose(self, k)
+    }
+}
+
+/// No incremental two-stage system: a type with no values, so the engine
+/// can never hold one.
+#[derive(Clone, Copy, Debug)]
+pub enum NoStages {}
+
+impl<P: EnginePose> Stages<P> for NoStages {
+    fn create() -> Option<Self> {
+        None
+    }
+    fn build(_: &PoseGraph<P>, _: &[(usize, f64)], _: &[usize]) -> Result<Self, FactorError> {
+        Err(FactorError::NotPositiveDefinite { step: 0 })
+    }
+    fn add_keyframe(&mut self, _: usize) {
+        match *self {}
+    }
+    fn apply_edge(&mut self, _: usize, _: &Edge<P>, _: f64) -> Result<(), UpdateError> {
+        match *self {}
+    }
+    fn solve_exact(&mut self, _: &PoseGraph<P>) -> Vec<P> {
+        match *self {}
+    }
+    fn solve(&mut self, _: &PoseGraph<P>, _: f64) -> &[usize] {
+        match *self {}
+    }
+    fn factor_nnz(&self) -> usize {
+        match *self {}
+    }
+    fn pose(&self, _: usize) -> P {
+        match *self {}
+    }
+}
+
+/// A square root `L` of an information matrix, `Ω = L Lᵀ` (Cholesky; the
+/// square roots of the diagonal for one that is not positive definite,
+/// which the graph refuses at its door).
+fn sqrt_information<const N: usize>(omega: &SMatrix<f64, N, N>) -> SMatrix<f64, N, N>
+where
+    nalgebra::Const<N>: nalgebra::DimMin<nalgebra::Const<N>, Output = nalgebra::Const<N>>,
+{
+    omega
+        .cholesky()
+        .map(|c| c.l())
+        .unwrap_or_else(|| SMatrix::from_diagonal(&omega.diagonal().map(|v| v.max(0.0).sqrt())))
+}
+
+impl EnginePose for Pose2 {
+    type Rows = SMatrix<f64, 3, 6>;
+    type Tails = Vector3<f64>;
+    type Jacobian = SMatrix<f64, 3, 6>;
+    type Stages = LinearStages;
+
+    fn whitened(edge: &Edge, xi: &Pose2, xj: &Pose2) -> (Self::Rows, Vector3<f64>) {
+        let (j, e) = se2::jacobian(edge, xi, xj);
+        let lt = sqrt_information(&edge.information.matrix()).transpose();
+        (lt * j, -(lt * e))
+    }
+
+    fn jacobian(edge: &Edge, xi: &Pose2, xj: &Pose2) -> Self::Jacobian {
+        se2::jacobian(edge, xi, xj).0
+    }
+
+    /// `e = p − target`, `J = [I₂ 0]`: two rows on `x, y`.
+    fn prior_rows(&self, prior: &PositionPrior) -> Vec<(Vec<(usize, f64)>, f64)> {
+        let p = self.position() - prior.target;
+        let e = Vector2::new(p.re, p.im);
+        let lt = sqrt_information(&prior.information).transpose();
+        let tails = -(lt * e);
+        (0..2)
+            .map(|r| (vec![(0, lt[(r, 0)]), (1, lt[(r, 1)])], tails[r]))
+            .collect()
+    }
+
+    fn innovation_chi2(
+        information: &super::super::graph::Information,
+        e: &[f64; 3],
+        jsj: &Matrix6<f64>,
+        variance_factor: f64,
+    ) -> Option<f64> {
+        let jsj: Matrix3<f64> = jsj.fixed_view::<3, 3>(0, 0).into_owned();
+        let s = information
+            .matrix()
+            .try_inverse()
+            .map(|cov| cov + variance_factor * jsj);
+        let e = Vector3::from(*e);
+        s.and_then(|s| s.cholesky()).map(|c| e.dot(&c.solve(&e)))
+    }
+
+    /// The rotations of the keyframe and of the measurement from the
+    /// caches: the sines and cosines dominate the bookkeeping otherwise.
+    fn cached_chi2(
+        turns: &mut Turns,
+        measured: &mut Turns,
+        e: usize,
+        edge: &Edge,
+        estimate: &[Pose2],
+    ) -> f64 {
+        let (xi, xj) = (&estimate[edge.from], &estimate[edge.to]);
+        let turn_i = turns.get(edge.from, xi.theta);
+        let turn_m = measured.get(e, edge.measurement.theta);
+        edge.information
+            .mahalanobis(&edge_error_turned(edge, xi, turn_i, xj, turn_m))
+    }
+
+    fn linear_solution(graph: &PoseGraph) -> Option<Vec<Pose2>> {
+        two_stage::solve(graph).ok()
+    }
+
+    fn cycle_rejected(n: usize, edges: &[Edge], switchable: &[bool], config: &OutlierConfig) -> Vec<bool> {
+        cycles::rejected(n, edges, switchable, config)
+    }
+
+    fn pairwise_held_out(
+        consistency: &Mutex<ConsistencyGraph>,
+        graph: &PoseGraph,
+        filter: &OutlierConfig,
+        ids: &[usize],
+        switchable: &[bool],
+    ) -> Vec<bool> {
+        let edges = graph.edges();
+        let mut pcm = consistency.lock().unwrap_or_else(|e| e.into_inner());
+        pcm.update(
+            graph.len(),
+            edges,
+            |e| filter.switchable(&edges[e]),
+            filter.pairwise_chi2,
+        );
+        pcm.held_out(ids, switchable)
+    }
+
+    fn gps_prior(fix: &GpsFix, georef: &Georef, weight: f64) -> Option<PositionPrior> {
+        Some(fix.prior(georef, weight))
+    }
+
+    fn georeference(
+        model: &mut Model,
+        config: &GpsConfig,
+        edges: &[Edge],
+        compact: &[usize],
+        poses: &mut Vec<Pose2>,
+        params: &LevenbergMarquardtParams,
+    ) {
+        model.georeference_planar(config, edges, compact, poses, params)
+    }
+
+    fn check(_: &EngineConfig) -> Result<(), String> {
+        Ok(())
+    }
+}
+
+impl EnginePose for Pose3 {
+    type Rows = SMatrix<f64, 6, 12>;
+    type Tails = Vector6<f64>;
+    type Jacobian = SMatrix<f64, 6, 12>;
+    type Stages = NoStages;
+
+    fn whitened(edge: &Edge<Pose3>, xi: &Pose3, xj: &Pose3) -> (Self::Rows, Vector6<f64>) {
+        let (j, e) = se3::jacobian(edge, xi, xj);
+        let lt = sqrt_information(edge.information.matrix()).transpose();
+        (lt * j, -(lt * e))
+    }
+
+    fn jacobian(edge: &Edge<Pose3>, xi: &Pose3, xj: &Pose3) -> Self::Jacobian {
+        se3::jacobian(edge, xi, xj).0
+    }
+
+    /// `e = p − target`, `J = [R 0]` on `(u, v)`: three rows on `u`.
+    fn prior_rows(&self, prior: &PositionPrior<Pose3>) -> Vec<(Vec<(usize, f64)>, f64)> {
+        let e = self.translation - prior.target;
+        let lt = sqrt_information(&prior.information).transpose();
+        let rows = lt * self.rotation.to_rotation_matrix().into_inner();
+        let tails = -(lt * e);
+        (0..3)
+            .map(|r| ((0..3).map(|c| (c, rows[(r, c)])).collect(), tails[r]))
+            .collect()
+    }
+
+    fn innovation_chi2(
+        information: &crate::graph::Information6,
+        e: &[f64; 6],
+        jsj: &Matrix6<f64>,
+        variance_factor: f64,
+    ) -> Option<f64> {
+        let s = information.covariance() + variance_factor * jsj;
+        let e = Vector6::from(*e);
+        s.cholesky().map(|c| e.dot(&c.solve(&e)))
+    }
+
+    fn cached_chi2(_: &mut Turns, _: &mut Turns, _: usize, edge: &Edge<Pose3>, estimate: &[Pose3]) -> f64 {
+        crate::graph::edge_chi2(edge, estimate)
+    }
+
+    fn linear_solution(graph: &PoseGraph<Pose3>) -> Option<Vec<Pose3>> {
+        chordal::solve(graph).ok()
+    }
+
+    fn cycle_rejected(_: usize, _: &[Edge<Pose3>], _: &[bool], _: &OutlierConfig) -> Vec<bool> {
+        Vec::new()
+    }
+
+    fn pairwise_held_out(
+        _: &Mutex<ConsistencyGraph>,
+        _: &PoseGraph<Pose3>,
+        _: &OutlierConfig,
+        _: &[usize],
+        _: &[bool],
+    ) -> Vec<bool> {
+        Vec::new()
+    }
+
+    fn gps_prior(_: &GpsFix, _: &Georef, _: f64) -> Option<PositionPrior<Pose3>> {
+        None
+    }
+
+    fn georeference(
+        _: &mut Model<Pose3>,
+        _: &GpsConfig,
+        _: &[Edge<Pose3>],
+        _: &[usize],
+        _: &mut Vec<Pose3>,
+        _: &LevenbergMarquardtParams,
+    ) {
+    }
+
+    fn check(config: &EngineConfig) -> Result<(), String> {
+        let o = &config.outliers;
+        if o.enabled && (o.cycles || o.pairwise) {
+            return Err("the cycle test and PCM (outliers.cycles, outliers.pairwise) are planar; turn them off for 3-D graphs".into());
+        }
+        if config.linear_stages || config.snapshot != super::SnapshotSource::GaussNewton {
+            return Err("the incremental two-stage system (linear_stages, snapshot = \"linear\") is planar; 3-D graphs use Gauss–Newton".into());
+        }
+        Ok(())
+    }
+}
