@@ -1,12 +1,15 @@
 #!/usr/bin/env python3
-"""Wrong loop closures in 3-D: the batch robust polish on Sphere2500.
+"""Wrong loop closures in 3-D on Sphere2500: the batch robust polish, or
+the incremental engine.
 
     cargo build --release --bin slamd
     python3 benches/outliers3.py [--count 1000] [--seeds 1 2] [--kinds random local ...]
+    python3 benches/outliers3.py --online [--kinds random]
 
 Each row injects `--count` outliers of one kind with benches/add_outliers3.py
-(Vertigo's semantics in SE(3)), runs `slamd solve FILE --robust --json`,
-and scores the switched-off loop closures against the side file
+(Vertigo's semantics in SE(3)), runs `slamd solve FILE --robust --json`
+(with --online: `slamd replay FILE --embedded --json`, the filter the
+engine runs by default), and scores the switched-off loop closures against the side file
 (precision, recall) and the map against Sphere2500's noise-free edges (ATE
 after rigid alignment). The first row is the clean file.
 """
@@ -17,10 +20,14 @@ DATA = os.environ.get("SLAMD_DATASETS") or os.path.normpath(os.path.join(HERE, "
 KINDS = ("random", "local", "random-grouped", "local-grouped")
 
 
-def solve(binary, path, truth):
-    out = subprocess.run([binary, "solve", path, "--robust", "--json", "--ground-truth", truth],
+def solve(binary, path, truth, online):
+    command = ["replay", path, "--embedded"] if online else ["solve", path, "--robust"]
+    out = subprocess.run([binary] + command + ["--json", "--ground-truth", truth],
                          check=True, capture_output=True, text=True).stdout
-    return json.loads(out)
+    r = json.loads(out)
+    if online:
+        r["seconds"] = r["total_s"]
+    return r
 
 
 def main():
@@ -31,11 +38,12 @@ def main():
     ap.add_argument("--count", type=int, default=1000)
     ap.add_argument("--seeds", type=int, nargs="+", default=[1, 2])
     ap.add_argument("--kinds", nargs="+", choices=KINDS, default=list(KINDS))
+    ap.add_argument("--online", action="store_true", help="replay through the incremental engine")
     a = ap.parse_args()
     src, truth = os.path.join(DATA, a.file), os.path.join(DATA, a.ground_truth)
     print(f"| {os.path.basename(a.file)} + outliers | seed | loop closures off | precision | recall | ATE (m) | χ² | s |")
     print("|---|---|---|---|---|---|---|---|")
-    clean = solve(a.slamd, src, truth)
+    clean = solve(a.slamd, src, truth, a.online)
     print(f"| clean | – | {len(clean['rejected_edges'])} | – | – | {clean['ate']:.4f} | {clean['chi2']:.2f} | {clean['seconds']:.2f} |")
     with tempfile.TemporaryDirectory() as tmp:
         for kind in a.kinds:
@@ -46,7 +54,7 @@ def main():
                                check=True, capture_output=True)
                 side = json.load(open(path + ".outliers.json"))
                 wrong = {o["edge_index"] for o in side["outliers"]}
-                r = solve(a.slamd, path, truth)
+                r = solve(a.slamd, path, truth, a.online)
                 off = set(r["rejected_edges"])
                 hit = len(wrong & off)
                 precision = hit / len(off) if off else 1.0

@@ -1,4 +1,4 @@
-//! The built-in synthetic world: a seeded Manhattan-style drive with noisy
+//! The built-in synthetic worlds: a seeded Manhattan-style drive with noisy
 //! odometry, loop closures and known ground truth.
 //!
 //! The robot drives 1 m steps along the streets of a square city of
@@ -9,10 +9,11 @@
 //! are the true relative poses plus Gaussian noise with the σ's below, and
 //! every edge carries the matching information. The city's side grows with
 //! √poses so that revisits stay frequent at any size (tests use hundreds of
-//! poses, scale benchmarks up to 1,000,000).
+//! poses, scale benchmarks up to 1,000,000). In 3-D ([`generate3`]) the same
+//! drive climbs a building, a floor at a time.
 
 use crate::geometry::Pose2;
-use crate::graph::{EdgeKind, Information, PoseGraph};
+use crate::graph::{EdgeKind, Information, Information6, Pose3, PoseGraph};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use std::collections::HashMap;
@@ -150,6 +151,111 @@ pub fn generate(params: &WorldParams) -> World {
     World { graph, truth }
 }
 
+/// A generated 3-D world: a building of storeys joined by a lift.
+#[derive(Clone, Debug)]
+pub struct World3 {
+    /// Keyframes `0..poses` and their noisy edges.
+    pub graph: PoseGraph<Pose3>,
+    /// The true pose of every keyframe; keyframe 0 at the origin.
+    pub truth: Vec<Pose3>,
+}
+
+/// Storey height of [`generate3`]'s building (m).
+pub const STOREY: f64 = 3.0;
+
+/// A building of `storeys` floors: the drive of [`generate`] split into
+/// `storeys` equal parts, part `f` on floor `f` (`z = f · STOREY`), each
+/// floor reached from the one below by a lift at the spot where the drive
+/// got to (one odometry step straight up). Loop closures join keyframes
+/// on one floor, by the same rule as in 2-D; every measurement carries
+/// noise of σ `sigma_xy` per axis and `sigma_theta` per angle (roll, pitch,
+/// yaw), and the matching information.
+pub fn generate3(params: &WorldParams, storeys: usize) -> World3 {
+    let storeys = storeys.max(1);
+    let plan = generate(params).truth;
+    let n = plan.len();
+    let floor = |k: usize| k * storeys / n;
+    // the plan's steps, except that where the floor changes the step is
+    // the lift: straight up, heading kept
+    let mut truth = vec![Pose3::IDENTITY];
+    for k in 1..n {
+        let step = if floor(k) != floor(k - 1) {
+            Pose3::from_xyz_rpy([0.0, 0.0, STOREY, 0.0, 0.0, 0.0])
+        } else {
+            let s = plan[k - 1].between(&plan[k]);
+            Pose3::from_xyz_rpy([s.x, s.y, 0.0, 0.0, 0.0, s.theta])
+        };
+        let next = truth[k - 1].compose(&step);
+        truth.push(next);
+    }
+    let mut rng = ChaCha8Rng::seed_from_u64(params.seed ^ 0x3d3d_3d3d);
+    let (sx, st) = (params.sigma_xy, params.sigma_theta);
+    let info = {
+        let (t, r) = (1.0 / (sx * sx), 1.0 / (st * st));
+        // the quaternion vector is half the angles: Ω_q = 4 Ω_angles
+        let mut u = [0.0; 21];
+        for (i, v) in [
+            (0, t),
+            (6, t),
+            (11, t),
+            (15, 4.0 * r),
+            (18, 4.0 * r),
+            (20, 4.0 * r),
+        ] {
+            u[i] = v;
+        }
+        Information6::from_upper(u).expect("positive σ")
+    };
+    let noisy = |rng: &mut ChaCha8Rng, t: Pose3| {
+        let d = [sx, sx, sx, st, st, st].map(|s| s * gaussian(rng));
+        t.compose(&Pose3::from_xyz_rpy(d))
+    };
+    let mut graph = PoseGraph::<Pose3>::default();
+    for id in 0..n as u64 {
+        graph.add_keyframe(id, None).expect("fresh ids");
+    }
+    let cell = |p: &Pose3| {
+        let t = &p.translation;
+        (t.x.round() as i64, t.y.round() as i64, t.z.round() as i64)
+    };
+    let mut visited: HashMap<(i64, i64, i64), Vec<usize>> = HashMap::new();
+    let reach = params.closure_radius.ceil() as i64;
+    for k in 0..n {
+        if k > 0 {
+            let m = noisy(&mut rng, truth[k - 1].between(&truth[k]));
+            graph
+                .add_edge(k as u64 - 1, k as u64, m, info, EdgeKind::Odometry)
+                .expect("valid odometry");
+            let (cx, cy, cz) = cell(&truth[k]);
+            let mut candidates = Vec::new();
+            for ox in -reach..=reach {
+                for oy in -reach..=reach {
+                    for &j in visited
+                        .get(&(cx + ox, cy + oy, cz))
+                        .map(Vec::as_slice)
+                        .unwrap_or(&[])
+                    {
+                        let d = (truth[j].translation - truth[k].translation).norm();
+                        if k - j > params.min_gap && d <= params.closure_radius {
+                            candidates.push(j);
+                        }
+                    }
+                }
+            }
+            if let Some(&j) = candidates.iter().max() {
+                if rng.random_bool(params.closure_probability) {
+                    let m = noisy(&mut rng, truth[j].between(&truth[k]));
+                    graph
+                        .add_edge(j as u64, k as u64, m, info, EdgeKind::LoopClosure)
+                        .expect("valid closure");
+                }
+            }
+        }
+        visited.entry(cell(&truth[k])).or_default().push(k);
+    }
+    World3 { graph, truth }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -165,6 +271,42 @@ mod tests {
         assert_eq!(a.graph.edges(), b.graph.edges());
         let c = generate(&WorldParams { seed: 2, ..p });
         assert_ne!(a.truth, c.truth);
+    }
+
+    #[test]
+    fn the_building_has_its_storeys_lifts_and_loop_closures_on_each_floor() {
+        let p = WorldParams {
+            poses: 1500,
+            ..Default::default()
+        };
+        let w = generate3(&p, 3);
+        assert_eq!(w.graph.len(), 1500);
+        // three floors, 3 m apart, reached by two vertical steps
+        let heights: std::collections::BTreeSet<i64> = w
+            .truth
+            .iter()
+            .map(|t| (t.translation.z * 1e6).round() as i64)
+            .collect();
+        assert_eq!(
+            heights.into_iter().collect::<Vec<_>>(),
+            vec![0, 3_000_000, 6_000_000]
+        );
+        let lifts = (1..1500)
+            .filter(|&k| (w.truth[k].translation.z - w.truth[k - 1].translation.z).abs() > 1.0)
+            .count();
+        assert_eq!(lifts, 2);
+        let closures: Vec<_> = w
+            .graph
+            .edges()
+            .iter()
+            .filter(|e| e.kind == EdgeKind::LoopClosure)
+            .collect();
+        assert!(closures.len() > 50, "only {} loop closures", closures.len());
+        for e in closures {
+            let dz = w.truth[e.from].translation.z - w.truth[e.to].translation.z;
+            assert!(dz.abs() < 1e-9, "a loop closure across floors");
+        }
+        assert_eq!(generate3(&p, 3).graph.edges(), w.graph.edges());
     }
 
     #[test]
