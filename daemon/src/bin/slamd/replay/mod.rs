@@ -8,22 +8,23 @@
 //! to a running daemon over shared memory (arrival: before the first is
 //! published; snapshot: received with an acknowledgement of the last).
 
-use crate::solve::file_name;
 use anyhow::{bail, Context};
 use clap::Args;
 use faer::c64;
 use slamd::config::Config;
 use slamd::engine::{EdgeInput, Engine, EngineConfig, FactorWork, FixInput};
 use slamd::geometry::Pose2;
-use slamd::graph::{chi2, KeyframeId, PoseGraph, RigidMotion};
+use slamd::graph::{KeyframeId, PoseGraph, RigidMotion};
 use slamd::io;
 use slamd::solver::{solve_batch, BatchOptions};
 use std::collections::HashMap;
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
+mod report;
 mod sink;
 mod spatial;
+use report::Report;
 pub use sink::{DaemonSink, EmbeddedSink, ReplayPose, Sink};
 
 #[derive(Args, Debug)]
@@ -291,100 +292,31 @@ pub fn run(opts: ReplayOpts) -> anyhow::Result<()> {
     if let Some(path) = &opts.out {
         crate::solve::write_result(path, &graph, &out.poses)?;
     }
-    let final_chi2 = chi2(&graph, &out.poses);
     let ate = truth
         .as_ref()
         .and_then(|t| slamd::eval::ate(&graph, &out.poses, t))
         .map(|a| a.rmse);
-    let ratios = out
-        .checked
-        .iter()
-        .map(|(k, poses)| {
-            let prefix = graph.prefix(k + 1);
-            let best = solve_batch(
-                &prefix,
-                &BatchOptions {
-                    polish: true,
-                    ..Default::default()
-                },
-            )?;
-            Ok((k + 1, chi2(&prefix, poses) / best.chi2.max(f64::MIN_POSITIVE)))
-        })
-        .collect::<anyhow::Result<Vec<(usize, f64)>>>()?;
-    let worst_ratio = ratios.iter().map(|&(_, r)| r).reduce(f64::max);
-    let robust = crate::robust::Rejected::of(&graph, out.switches.as_deref());
-    let lat = Latency::of(out.latencies);
+    let georeferenced = !out.enu.is_empty();
+    let report = Report::of(&graph, out, sink.mode(), sink.engine_stats(), ate, |prefix| {
+        let options = BatchOptions {
+            polish: true,
+            ..Default::default()
+        };
+        Ok(solve_batch(prefix, &options)?.chi2)
+    })?;
     if opts.json {
-        let v = serde_json::json!({
-            "file": opts.file.display().to_string(),
-            "skipped_lines": skipped,
-            "mode": sink.mode(),
-            "keyframes": graph.len(),
-            "edges": graph.edges().len(),
-            "p50_us": lat.p50,
-            "p99_us": lat.p99,
-            "max_us": lat.max,
-            "total_s": out.total_s,
-            "closing_s": out.closing_s,
-            "resolves": out.resolves,
-            "engine": sink.engine_stats().map(|s| serde_json::json!({
-                "refreshes": s.refreshes,
-                "relinearisations": s.relinearisations,
-                "nonlinear_resolves": s.nonlinear_resolves,
-                "drift_resolves": s.drift_resolves,
-                "recoveries": s.recoveries,
-                "walked_entries": s.work.walked,
-                "solved_entries": s.work.solved,
-            })),
-            "chi2": final_chi2,
-            "ate": ate,
-            "prefixes_checked": out.checked.len(),
-            "worst_prefix_ratio": worst_ratio,
-            "prefix_ratios": ratios,
-            "loop_closures": robust.loop_closures,
-            "switched_off": robust.rejected.len(),
-            "rejected_edges": out.switches.as_ref().map(|_| &robust.rejected),
+        let extra = serde_json::json!({
             "gps_fixes": fixes.len(),
-            "georeferenced": !out.enu.is_empty(),
+            "georeferenced": georeferenced,
             "enu_rmse": enu_rmse,
         });
-        println!("{v}");
+        println!("{}", report.json(&opts, skipped, extra));
     } else {
-        println!(
-            "{} ({}): {} keyframes, {} edges",
-            file_name(&opts.file),
-            sink.mode(),
-            graph.len(),
-            graph.edges().len()
-        );
-        println!(
-            "latency per keyframe  p50 {:.0} µs  p99 {:.0} µs  max {:.0} µs",
-            lat.p50, lat.p99, lat.max
-        );
-        println!(
-            "total                 {:.3} s  ({} re-solves; closing one {:.3} s)",
-            out.total_s, out.resolves, out.closing_s
-        );
-        println!("final chi2            {final_chi2:.3}");
-        if let Some(a) = ate {
-            println!("ate                   {a:.4} m");
-        }
-        if let Some(e) = enu_rmse {
-            println!("enu rmse              {e:.4} m  ({} fixes)", fixes.len());
-        }
-        if out.switches.is_some() {
-            println!(
-                "loop closures         {} ({} switched off)",
-                robust.loop_closures,
-                robust.rejected.len()
-            );
-        }
-        if let Some(w) = worst_ratio {
-            println!(
-                "worst snapshot/prefix-optimum chi2 over {} prefixes: {w:.4}",
-                out.checked.len()
-            );
-        }
+        report.print(&opts, sink.mode(), || {
+            if let Some(e) = enu_rmse {
+                println!("enu rmse              {e:.4} m  ({} fixes)", fixes.len());
+            }
+        });
     }
     Ok(())
 }
