@@ -172,7 +172,7 @@ pub fn read_graph_with(path: &Path, on_invalid: OnInvalid) -> Result<(PoseGraph,
             path: path.to_owned(),
             line: None,
             kind: ReadErrorKind::Malformed(
-                "a 3-D pose graph; this command works on 2-D graphs (`slamd solve` and `slamd eval` read both)".into(),
+                "a 3-D pose graph; this command works on 2-D graphs (`slamd solve`, `slamd eval` and `slamd replay --embedded` read both)".into(),
             ),
         });
     }
