@@ -1,12 +1,15 @@
 //! `slamd solve FILE`: the batch pipeline on one graph file.
 
+use crate::robust::Rejected;
 use anyhow::Context;
 use clap::Args;
-use slamd::eval::ate;
+use slamd::eval::{ate, Ate};
+use slamd::geometry::Pose2;
 use slamd::graph::PoseGraph;
 use slamd::io::{self, svg};
+use slamd::nonlinear::LiePose;
 use slamd::outliers::OutlierConfig;
-use slamd::solver::{solve_batch, BatchOptions, Formulation};
+use slamd::solver::{solve_batch, BatchOptions, BatchSolution, Formulation};
 use std::path::PathBuf;
 
 #[derive(Args, Debug)]
@@ -84,23 +87,7 @@ pub fn run(opts: SolveOpts) -> anyhow::Result<()> {
                 .collect()
         });
         let aligned_truth = truth_poses.map(|t| slamd::eval::aligned_onto(&t, &sol.poses));
-        let mut layers = vec![svg::Layer {
-            label: "estimate",
-            poses: &sol.poses,
-            color: svg::ESTIMATE,
-        }];
-        if let Some(t) = &aligned_truth {
-            layers.push(svg::Layer {
-                label: "ground truth",
-                poses: t,
-                color: svg::TRUTH,
-            });
-        }
-        layers.push(svg::Layer {
-            label: "initial guess",
-            poses: &guess,
-            color: svg::GUESS,
-        });
+        let layers = plot_layers(&sol.poses, aligned_truth.as_deref(), &guess);
         let title = format!(
             "{} ({}{})",
             file_name(&opts.file),
@@ -116,68 +103,28 @@ pub fn run(opts: SolveOpts) -> anyhow::Result<()> {
         svg::write_svg(plot, &title, &layers).map_err(anyhow::Error::msg)?;
     }
 
-    let iterations = sol.polish.as_ref().map(|r| r.iterations.len());
     let robust = crate::robust::Rejected::of(&graph, sol.switches.as_deref());
     let enu_rmse = gps
         .as_ref()
         .and_then(|g| crate::gps::enu_rmse(g, sol.georef.as_ref(), &sol.poses));
     if opts.json {
-        let v = serde_json::json!({
-            "file": opts.file.display().to_string(),
-            "formulation": opts.formulation.name(),
-            "polish": opts.polish,
-            "nodes": graph.len(),
-            "edges": graph.edges().len(),
-            "chi2": sol.chi2,
-            "linear_chi2": sol.linear_chi2,
-            "ate": ate.map(|a| a.rmse),
-            "seconds": sol.seconds(),
-            "linear_seconds": sol.linear_seconds,
-            "polish_seconds": sol.polish_seconds,
-            "iterations": iterations,
+        let extra = serde_json::json!({
             "rho": sol.rho,
             "median_axis_length": sol.median_axis_length,
             "gps_fixes": gps.as_ref().map(|g| g.input.fixes.len()),
             "georeferenced": sol.georef.is_some(),
             "enu_rmse": enu_rmse,
-            "robust": opts.robust,
-            "loop_closures": robust.loop_closures,
-            "rejected_edges": sol.switches.as_ref().map(|_| &robust.rejected),
-            "skipped_lines": skipped,
         });
-        println!("{v}");
-    } else {
-        println!("file           {}", opts.file.display());
-        println!("keyframes      {}", graph.len());
-        println!("edges          {}", graph.edges().len());
-        println!("formulation    {}", opts.formulation);
         println!(
-            "linear chi2    {:.3}  ({:.1} ms)",
-            sol.linear_chi2,
-            sol.linear_seconds * 1e3
+            "{}",
+            summary_json(&opts, &graph, &sol, ate, &robust, skipped, extra)
         );
-        if let Some(r) = &sol.polish {
-            println!(
-                "polish         {} iterations, converged: {}  ({:.1} ms)",
-                r.iterations.len(),
-                r.converged,
-                sol.polish_seconds * 1e3
-            );
-        }
+    } else {
+        print_head(&opts, &graph, &sol, "");
         if let (Some(rho), Some(m)) = (sol.rho, sol.median_axis_length) {
             println!("scale rho      {rho:.4}  (median virtual axis {m:.4} before scaling; truth 1)");
         }
-        println!("chi2           {:.3}", sol.chi2);
-        if sol.switches.is_some() {
-            println!(
-                "loop closures  {} ({} switched off)",
-                robust.loop_closures,
-                robust.rejected.len()
-            );
-        }
-        if let Some(a) = ate {
-            println!("ate            {:.4} m  over {} keyframes", a.rmse, a.matched);
-        }
+        print_result(&sol, &robust, ate);
         if let Some(g) = &gps {
             println!(
                 "gps            {} fixes, georeferenced: {}",
@@ -191,6 +138,105 @@ pub fn run(opts: SolveOpts) -> anyhow::Result<()> {
         println!("seconds        {:.4}", sol.seconds());
     }
     Ok(())
+}
+
+/// A solve's picture: the estimate, the ground truth aligned onto it when
+/// given, and the initial guess.
+pub fn plot_layers<'a>(
+    estimate: &'a [Pose2],
+    truth: Option<&'a [Pose2]>,
+    guess: &'a [Pose2],
+) -> Vec<svg::Layer<'a>> {
+    let mut layers = vec![svg::Layer {
+        label: "estimate",
+        poses: estimate,
+        color: svg::ESTIMATE,
+    }];
+    if let Some(t) = truth {
+        layers.push(svg::Layer {
+            label: "ground truth",
+            poses: t,
+            color: svg::TRUTH,
+        });
+    }
+    layers.push(svg::Layer {
+        label: "initial guess",
+        poses: guess,
+        color: svg::GUESS,
+    });
+    layers
+}
+
+/// The JSON fields every solve reports, `extra` added.
+pub fn summary_json<P: LiePose>(
+    opts: &SolveOpts,
+    graph: &PoseGraph<P>,
+    sol: &BatchSolution<P>,
+    ate: Option<Ate>,
+    robust: &Rejected,
+    skipped: serde_json::Value,
+    extra: serde_json::Value,
+) -> serde_json::Value {
+    let mut v = serde_json::json!({
+        "file": opts.file.display().to_string(),
+        "formulation": opts.formulation.name(),
+        "polish": opts.polish,
+        "nodes": graph.len(),
+        "edges": graph.edges().len(),
+        "chi2": sol.chi2,
+        "linear_chi2": sol.linear_chi2,
+        "ate": ate.map(|a| a.rmse),
+        "seconds": sol.seconds(),
+        "linear_seconds": sol.linear_seconds,
+        "polish_seconds": sol.polish_seconds,
+        "iterations": sol.polish.as_ref().map(|r| r.iterations.len()),
+        "robust": opts.robust,
+        "loop_closures": robust.loop_closures,
+        "rejected_edges": sol.switches.as_ref().map(|_| &robust.rejected),
+        "skipped_lines": skipped,
+    });
+    if let (Some(v), serde_json::Value::Object(extra)) = (v.as_object_mut(), extra) {
+        v.extend(extra);
+    }
+    v
+}
+
+/// The text report's first lines: the file, its size, the linear solve
+/// and the polish; `label` follows the file name.
+pub fn print_head<P: LiePose>(opts: &SolveOpts, graph: &PoseGraph<P>, sol: &BatchSolution<P>, label: &str) {
+    println!("file           {}{label}", opts.file.display());
+    println!("keyframes      {}", graph.len());
+    println!("edges          {}", graph.edges().len());
+    println!("formulation    {}", opts.formulation);
+    println!(
+        "linear chi2    {:.3}  ({:.1} ms)",
+        sol.linear_chi2,
+        sol.linear_seconds * 1e3
+    );
+    if let Some(r) = &sol.polish {
+        println!(
+            "polish         {} iterations, converged: {}  ({:.1} ms)",
+            r.iterations.len(),
+            r.converged,
+            sol.polish_seconds * 1e3
+        );
+    }
+}
+
+/// The text report's result lines: χ², the loop closures switched off,
+/// the ATE.
+pub fn print_result<P: LiePose>(sol: &BatchSolution<P>, robust: &Rejected, ate: Option<Ate>) {
+    println!("chi2           {:.3}", sol.chi2);
+    if sol.switches.is_some() {
+        println!(
+            "loop closures  {} ({} switched off)",
+            robust.loop_closures,
+            robust.rejected.len()
+        );
+    }
+    if let Some(a) = ate {
+        println!("ate            {:.4} m  over {} keyframes", a.rmse, a.matched);
+    }
 }
 
 pub fn write_result(

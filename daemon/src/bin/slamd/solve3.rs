@@ -1,7 +1,7 @@
 //! `slamd solve FILE` on a 3-D graph: the chordal two-stage initialiser,
 //! then optionally the polish on g2o's SE(3) cost.
 
-use crate::solve::{file_name, SolveOpts};
+use crate::solve::{file_name, plot_layers, print_head, print_result, summary_json, SolveOpts};
 use anyhow::{bail, Context};
 use slamd::eval::{aligned_onto, ate3};
 use slamd::geometry::Pose2;
@@ -45,58 +45,16 @@ pub fn run(opts: &SolveOpts, graph: &PoseGraph<Pose3>, skipped: serde_json::Valu
     if let Some(plot) = &opts.plot {
         plot_top_view(plot, opts, graph, &sol.poses, truth.as_ref())?;
     }
-    let iterations = sol.polish.as_ref().map(|r| r.iterations.len());
     let robust = crate::robust::Rejected::of(graph, sol.switches.as_deref());
     if opts.json {
-        let v = serde_json::json!({
-            "file": opts.file.display().to_string(),
-            "dimension": "3d",
-            "formulation": opts.formulation.name(),
-            "polish": opts.polish,
-            "nodes": graph.len(),
-            "edges": graph.edges().len(),
-            "chi2": sol.chi2,
-            "linear_chi2": sol.linear_chi2,
-            "ate": ate.map(|a| a.rmse),
-            "seconds": sol.seconds(),
-            "linear_seconds": sol.linear_seconds,
-            "polish_seconds": sol.polish_seconds,
-            "iterations": iterations,
-            "robust": opts.robust,
-            "loop_closures": robust.loop_closures,
-            "rejected_edges": sol.switches.as_ref().map(|_| &robust.rejected),
-            "skipped_lines": skipped,
-        });
-        println!("{v}");
-    } else {
-        println!("file           {}  (3-D)", opts.file.display());
-        println!("keyframes      {}", graph.len());
-        println!("edges          {}", graph.edges().len());
-        println!("formulation    {}", opts.formulation);
+        let extra = serde_json::json!({ "dimension": "3d" });
         println!(
-            "linear chi2    {:.3}  ({:.1} ms)",
-            sol.linear_chi2,
-            sol.linear_seconds * 1e3
+            "{}",
+            summary_json(opts, graph, &sol, ate, &robust, skipped, extra)
         );
-        if let Some(r) = &sol.polish {
-            println!(
-                "polish         {} iterations, converged: {}  ({:.1} ms)",
-                r.iterations.len(),
-                r.converged,
-                sol.polish_seconds * 1e3
-            );
-        }
-        println!("chi2           {:.3}", sol.chi2);
-        if sol.switches.is_some() {
-            println!(
-                "loop closures  {} ({} switched off)",
-                robust.loop_closures,
-                robust.rejected.len()
-            );
-        }
-        if let Some(a) = ate {
-            println!("ate            {:.4} m  over {} keyframes", a.rmse, a.matched);
-        }
+    } else {
+        print_head(opts, graph, &sol, "  (3-D)");
+        print_result(&sol, &robust, ate);
         println!("seconds        {:.4}", sol.seconds());
     }
     Ok(())
@@ -127,23 +85,7 @@ fn plot_top_view(
             .collect();
         aligned_onto(&t, &estimate)
     });
-    let mut layers = vec![svg::Layer {
-        label: "estimate",
-        poses: &estimate,
-        color: svg::ESTIMATE,
-    }];
-    if let Some(t) = &aligned {
-        layers.push(svg::Layer {
-            label: "ground truth",
-            poses: t,
-            color: svg::TRUTH,
-        });
-    }
-    layers.push(svg::Layer {
-        label: "initial guess",
-        poses: &guess,
-        color: svg::GUESS,
-    });
+    let layers = plot_layers(&estimate, aligned.as_deref(), &guess);
     let title = format!(
         "{} ({}{}, top view)",
         file_name(&opts.file),
