@@ -2,7 +2,7 @@
 //! Levenberg–Marquardt and one Hessian layout serve SE(2) and SE(3).
 //!
 //! A pose owns `DOF` variables, a local perturbation `δ` around it: the
-//! additive `(x, y, θ)` in the plane, `X ⊞ δ = X · Exp(δ)` in space (see
+//! additive `(x, y, θ)` in the plane, `X ⊞ δ = X · (R(q(v)), u)` in space (see
 //! [`super::se3`]). Each edge contributes the `2·DOF`-square block
 //! `Jᵀ Ω J` and the gradient `Jᵀ Ω e` over the variables of its two poses;
 //! a position prior the `DOF`-square block of one pose.

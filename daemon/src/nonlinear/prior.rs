@@ -38,7 +38,7 @@ pub struct Robust<'a> {
     pub switchable: &'a [bool],
 }
 
-/// What the polish minimises: g2o's SE(2) cost of the edges (a robust
+/// What the polish minimises: g2o's SE(2) or SE(3) cost of the edges (a robust
 /// cost `ρ(χ²)` on switchable ones) plus the priors' `eᵀΩe`.
 #[derive(Clone, Copy, Debug)]
 pub struct Problem<'a, P: LiePose = Pose2> {
