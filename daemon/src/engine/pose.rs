@@ -5,8 +5,9 @@
 //! whitened rows of an edge, its innovation test, the linear initialiser a
 //! re-solve starts from) or a feature only the plane has so far (the
 //! two-stage incremental system, GPS, the cycle test and PCM), which the
-//! spatial pose declines: its configuration check refuses them, so they
-//! are never asked for.
+//! spatial pose declines: [`EnginePose::check`] names them and
+//! [`Engine::create`](super::Engine::create) turns them off with a
+//! warning, so they are never asked for.
 
 use super::linear_stages::LinearStages;
 use super::model::Model;
