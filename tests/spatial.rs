@@ -141,14 +141,10 @@ fn sphere2500_reaches_the_published_optimum() {
     assert!(s.linear_chi2 < 2.0 * s.chi2, "linear chi2 {}", s.linear_chi2);
 }
 
-/// The robust polish switches off wrong loop closures in 3-D and keeps
-/// the true ones: a noise-free building of three storeys, every keyframe
-/// linked to its neighbours along x, y and z, and five wrong loop
-/// closures, as confident, each 3 m and 29° off.
-#[test]
-fn the_robust_polish_switches_off_wrong_loop_closures_in_3d() {
-    let (w, h, storeys) = (4, 4, 3);
-    let truth: Vec<Pose3> = (0..w * h * storeys)
+/// Keyframes on a `w × h` grid 2 m apart on each of `storeys` floors 3 m
+/// apart, keyframe `k` turned `yaw_step · k` about the vertical.
+fn building(w: usize, h: usize, storeys: usize, yaw_step: f64) -> Vec<Pose3> {
+    (0..w * h * storeys)
         .map(|k| {
             let (x, y, z) = (k % w, (k / w) % h, k / (w * h));
             Pose3::from_xyz_rpy([
@@ -157,10 +153,20 @@ fn the_robust_polish_switches_off_wrong_loop_closures_in_3d() {
                 3.0 * z as f64,
                 0.0,
                 0.0,
-                0.3 * k as f64,
+                yaw_step * k as f64,
             ])
         })
-        .collect();
+        .collect()
+}
+
+/// The robust polish switches off wrong loop closures in 3-D and keeps
+/// the true ones: a noise-free building of three storeys, every keyframe
+/// linked to its neighbours along x, y and z, and five wrong loop
+/// closures, as confident, each 3 m and 29° off.
+#[test]
+fn the_robust_polish_switches_off_wrong_loop_closures_in_3d() {
+    let (w, h, storeys) = (4, 4, 3);
+    let truth = building(w, h, storeys, 0.3);
     let n = truth.len();
     let mut pairs: Vec<(usize, usize)> = (1..n).map(|k| (k - 1, k)).collect();
     pairs.extend((0..n - w).map(|k| (k, k + w)));
@@ -210,19 +216,7 @@ fn the_robust_polish_switches_off_wrong_loop_closures_in_3d() {
 fn the_engine_streams_a_3d_graph_to_the_batch_optimum() {
     use slamd::engine::{EdgeInput, Engine, EngineConfig};
     let (w, h, storeys) = (5, 4, 3);
-    let truth: Vec<Pose3> = (0..w * h * storeys)
-        .map(|k| {
-            let (x, y, z) = (k % w, (k / w) % h, k / (w * h));
-            Pose3::from_xyz_rpy([
-                2.0 * x as f64,
-                2.0 * y as f64,
-                3.0 * z as f64,
-                0.0,
-                0.0,
-                0.4 * k as f64,
-            ])
-        })
-        .collect();
+    let truth = building(w, h, storeys, 0.4);
     let n = truth.len();
     let mut pairs: Vec<(usize, usize)> = (1..n).map(|k| (k - 1, k)).collect();
     pairs.extend((0..n - w).step_by(2).map(|k| (k, k + w)));

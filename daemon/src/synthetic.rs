@@ -13,7 +13,7 @@
 //! drive climbs a building, a floor at a time.
 
 use crate::geometry::Pose2;
-use crate::graph::{EdgeKind, Information, Information6, Pose3, PoseGraph};
+use crate::graph::{EdgeKind, Information, Information6, Pose3, PoseGraph, RigidMotion};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use std::collections::HashMap;
@@ -104,10 +104,6 @@ pub fn generate(params: &WorldParams) -> World {
         truth.push(Pose2::new(x as f64, y as f64, theta));
     }
 
-    let mut graph = PoseGraph::default();
-    for id in 0..n as u64 {
-        graph.add_keyframe(id, None).expect("fresh ids");
-    }
     let noisy = |rng: &mut ChaCha8Rng, t: Pose2| {
         Pose2::new(
             t.x + params.sigma_xy * gaussian(rng),
@@ -115,21 +111,45 @@ pub fn generate(params: &WorldParams) -> World {
             crate::geometry::wrap_angle(t.theta + params.sigma_theta * gaussian(rng)),
         )
     };
-    let mut visited: HashMap<(i64, i64), Vec<usize>> = HashMap::new();
-    let cell = |p: &Pose2| (p.x.round() as i64, p.y.round() as i64);
+    let graph = drive_edges(&truth, params, &mut rng, info, noisy);
+    World { graph, truth }
+}
+
+/// The edges of a drive along `truth`, keyframe `k` with id `k`: a noisy
+/// odometry edge into every keyframe and, where the drive passes within
+/// `closure_radius` of a keyframe more than `min_gap` steps older, a noisy
+/// loop closure to the most recent such keyframe with probability
+/// `closure_probability`. Old keyframes are found through the 1 m cells
+/// around the position (same height only).
+fn drive_edges<P: RigidMotion>(
+    truth: &[P],
+    params: &WorldParams,
+    rng: &mut ChaCha8Rng,
+    info: P::Information,
+    noisy: impl Fn(&mut ChaCha8Rng, P) -> P,
+) -> PoseGraph<P> {
+    let n = truth.len();
+    let mut graph = PoseGraph::<P>::default();
+    for id in 0..n as u64 {
+        graph.add_keyframe(id, None).expect("fresh ids");
+    }
+    let position = |k: usize| nalgebra::Vector3::from(truth[k].position3());
+    let cell = |k: usize| position(k).map(|v| v.round() as i64);
+    let mut visited: HashMap<(i64, i64, i64), Vec<usize>> = HashMap::new();
     let reach = params.closure_radius.ceil() as i64;
     for k in 0..n {
+        let c = cell(k);
         if k > 0 {
-            let m = noisy(&mut rng, truth[k - 1].between(&truth[k]));
+            let m = noisy(rng, truth[k - 1].between(&truth[k]));
             graph
                 .add_edge(k as u64 - 1, k as u64, m, info, EdgeKind::Odometry)
                 .expect("valid odometry");
-            let (cx, cy) = cell(&truth[k]);
             let mut candidates = Vec::new();
             for ox in -reach..=reach {
                 for oy in -reach..=reach {
-                    for &j in visited.get(&(cx + ox, cy + oy)).map(Vec::as_slice).unwrap_or(&[]) {
-                        let d = (truth[j].position() - truth[k].position()).norm();
+                    let near = visited.get(&(c.x + ox, c.y + oy, c.z)).map(Vec::as_slice);
+                    for &j in near.unwrap_or(&[]) {
+                        let d = (position(j) - position(k)).norm();
                         if k - j > params.min_gap && d <= params.closure_radius {
                             candidates.push(j);
                         }
@@ -139,16 +159,16 @@ pub fn generate(params: &WorldParams) -> World {
             // at most one closure per keyframe, to the most recent match
             if let Some(&j) = candidates.iter().max() {
                 if rng.random_bool(params.closure_probability) {
-                    let m = noisy(&mut rng, truth[j].between(&truth[k]));
+                    let m = noisy(rng, truth[j].between(&truth[k]));
                     graph
                         .add_edge(j as u64, k as u64, m, info, EdgeKind::LoopClosure)
                         .expect("valid closure");
                 }
             }
         }
-        visited.entry(cell(&truth[k])).or_default().push(k);
+        visited.entry((c.x, c.y, c.z)).or_default().push(k);
     }
-    World { graph, truth }
+    graph
 }
 
 /// A generated 3-D world: a building of storeys joined by a lift.
@@ -210,49 +230,7 @@ pub fn generate3(params: &WorldParams, storeys: usize) -> World3 {
         let d = [sx, sx, sx, st, st, st].map(|s| s * gaussian(rng));
         t.compose(&Pose3::from_xyz_rpy(d))
     };
-    let mut graph = PoseGraph::<Pose3>::default();
-    for id in 0..n as u64 {
-        graph.add_keyframe(id, None).expect("fresh ids");
-    }
-    let cell = |p: &Pose3| {
-        let t = &p.translation;
-        (t.x.round() as i64, t.y.round() as i64, t.z.round() as i64)
-    };
-    let mut visited: HashMap<(i64, i64, i64), Vec<usize>> = HashMap::new();
-    let reach = params.closure_radius.ceil() as i64;
-    for k in 0..n {
-        if k > 0 {
-            let m = noisy(&mut rng, truth[k - 1].between(&truth[k]));
-            graph
-                .add_edge(k as u64 - 1, k as u64, m, info, EdgeKind::Odometry)
-                .expect("valid odometry");
-            let (cx, cy, cz) = cell(&truth[k]);
-            let mut candidates = Vec::new();
-            for ox in -reach..=reach {
-                for oy in -reach..=reach {
-                    for &j in visited
-                        .get(&(cx + ox, cy + oy, cz))
-                        .map(Vec::as_slice)
-                        .unwrap_or(&[])
-                    {
-                        let d = (truth[j].translation - truth[k].translation).norm();
-                        if k - j > params.min_gap && d <= params.closure_radius {
-                            candidates.push(j);
-                        }
-                    }
-                }
-            }
-            if let Some(&j) = candidates.iter().max() {
-                if rng.random_bool(params.closure_probability) {
-                    let m = noisy(&mut rng, truth[j].between(&truth[k]));
-                    graph
-                        .add_edge(j as u64, k as u64, m, info, EdgeKind::LoopClosure)
-                        .expect("valid closure");
-                }
-            }
-        }
-        visited.entry(cell(&truth[k])).or_default().push(k);
-    }
+    let graph = drive_edges(&truth, params, &mut rng, info, noisy);
     World3 { graph, truth }
 }
 
