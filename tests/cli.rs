@@ -236,10 +236,12 @@ fn solve_eval_and_replay_read_3d_graphs() {
     assert_eq!(r["dimension"].as_str(), Some("3d"));
     let streamed = r["chi2"].as_f64().expect("chi2");
     assert!((streamed - chi2).abs() < 1e-6 * chi2, "{streamed} vs {chi2}");
-    let (code, _, err) = run_slamd(&["replay", file]);
+    // a daemon serving 2-D graphs is named, not fed messages it refuses
+    let daemon = crate::daemon::Daemon::start("cli-2d", &[]);
+    let (code, _, err) = run_slamd(&["replay", file, "--namespace", &daemon.namespace]);
     assert_ne!(code, 0);
     assert!(
-        err.contains("the daemon serves 2-D graphs; replay a 3-D graph with --embedded"),
+        err.contains("serves 2-D graphs and this graph is 3-D; start one with SLAMD_DIMENSION=3"),
         "{err}"
     );
 }

@@ -167,6 +167,14 @@ fn two_frontends_interleave_edges() {
     assert!(daemon.stop().success());
 }
 
+/// A 2-D information whose upper triangle `[1, 3, 0, 1, 0, 1]` is not
+/// positive definite, as the wire writes it.
+fn indefinite() -> [f64; 21] {
+    let mut v = [0.0; 21];
+    v[..6].copy_from_slice(&[1.0, 3.0, 0.0, 1.0, 0.0, 1.0]);
+    v
+}
+
 #[test]
 fn hostile_stream_gets_clean_rejections_while_valid_data_flows() {
     let daemon = Daemon::start(
@@ -198,14 +206,14 @@ fn hostile_stream_gets_clean_rejections_while_valid_data_flows() {
             2 => Some((
                 RejectionReason::NonFinite,
                 Edge {
-                    dx: f64::NAN,
+                    measurement: [f64::NAN, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
                     ..raw(k)
                 },
             )),
             3 => Some((
                 RejectionReason::NotPositiveDefinite,
                 Edge {
-                    information: [1.0, 3.0, 0.0, 1.0, 0.0, 1.0],
+                    information: indefinite(),
                     ..raw(k)
                 },
             )),
@@ -229,7 +237,14 @@ fn hostile_stream_gets_clean_rejections_while_valid_data_flows() {
             8 => Some((
                 RejectionReason::NonFinite,
                 Edge {
-                    information: [f64::INFINITY; 6],
+                    information: [f64::INFINITY; 21],
+                    ..raw(k)
+                },
+            )),
+            9 => Some((
+                RejectionReason::Dimension,
+                Edge {
+                    dimension: 3,
                     ..raw(k)
                 },
             )),
@@ -273,7 +288,7 @@ fn hostile_stream_gets_clean_rejections_while_valid_data_flows() {
     f.flush().unwrap();
     let (poses, header) = wait_for_ack(&snaps, f.id(), seq);
     assert_eq!(poses.len(), 13);
-    assert_eq!(header.rejected, 8);
+    assert_eq!(header.rejected, 9);
     assert!(daemon.stop().success());
 }
 

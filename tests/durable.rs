@@ -2,6 +2,7 @@
 //! loses nothing it acknowledged, and a replay through it completes.
 
 use crate::daemon::Daemon;
+use slamd::geometry::Pose2;
 use slamd::store::MapFile;
 use slamd_tests::{dataset, read, slamd_bin};
 use std::path::PathBuf;
@@ -47,7 +48,7 @@ fn a_stream_survives_two_daemon_kills_and_ends_at_the_optimum() {
     assert!(daemon.stop().success());
 
     let g = read("intel_sesync.g2o");
-    let map = MapFile::read(&dir.join("map")).expect("a checkpoint on SIGTERM");
+    let map = MapFile::<Pose2>::read(&dir.join("map")).expect("a checkpoint on SIGTERM");
     assert_eq!(map.keyframes.len(), g.len());
     assert_eq!(map.edges.len(), g.edges().len());
     // no edge went in twice, though the frontend sent some again
@@ -100,7 +101,7 @@ fn a_daemon_continues_a_saved_map_to_the_optimum() {
     slamd_tests::feed(&mut engine, &g, 0..1750);
     let bytes = engine.map().encode();
     drop(engine);
-    let map = MapFile::decode(std::path::Path::new("manhattan-1750"), &bytes).unwrap();
+    let map = MapFile::<Pose2>::decode(std::path::Path::new("manhattan-1750"), &bytes).unwrap();
     let config = slamd::config::Config {
         namespace: format!("slamd-test-{}-continue", std::process::id()),
         ..slamd::config::Config::default()

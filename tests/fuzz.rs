@@ -6,7 +6,8 @@
 //! `PROPTEST_CASES=1000000 cargo test --release -p slamd-tests --test integration fuzz::`
 
 use proptest::prelude::*;
-use slamd::graph::Information;
+use slamd::geometry::Pose2;
+use slamd::graph::{Information, Information6, Pose3};
 use slamd::io::{parse_graph_with, Format, OnInvalid, ReadErrorKind};
 use slamd_protocol::codec::{edge_in, gps_in, keyframe_in};
 use slamd_protocol::{Edge, GpsFix, Keyframe, RejectionReason, PROTOCOL_VERSION};
@@ -45,30 +46,33 @@ fn version() -> impl Strategy<Value = u32> {
     prop_oneof![4 => Just(PROTOCOL_VERSION), 1 => any::<u32>()]
 }
 
+/// A dimension, usually 2 or 3.
+fn dimension() -> impl Strategy<Value = u32> {
+    prop_oneof![4 => 2u32..4, 1 => any::<u32>()]
+}
+
 fn edge() -> impl Strategy<Value = Edge> {
     (
         (0u64..6, 0u64..6, any::<u32>(), any::<u64>()),
-        [number(), number(), number()],
-        [number(), number(), number(), number(), number(), number()],
+        prop::array::uniform7(number()),
+        prop::array::uniform21(number()),
         (
             prop_oneof![3 => 0u32..3, 1 => any::<u32>()],
             version(),
-            any::<u32>(),
+            dimension(),
         ),
     )
         .prop_map(
-            |((from, to, frontend, sequence), d, information, (kind, protocol, reserved))| Edge {
+            |((from, to, frontend, sequence), measurement, information, (kind, protocol, dimension))| Edge {
                 from,
                 to,
-                dx: d[0],
-                dy: d[1],
-                dtheta: d[2],
+                measurement,
                 information,
                 kind,
                 frontend,
                 sequence,
                 protocol,
-                reserved,
+                dimension,
             },
         )
 }
@@ -78,13 +82,13 @@ fn keyframe() -> impl Strategy<Value = Keyframe> {
         (
             any::<u64>(),
             any::<u64>(),
-            [number(), number(), number()],
+            prop::array::uniform7(number()),
             any::<u32>(),
         ),
-        (any::<u32>(), any::<u64>(), version(), any::<u32>()),
+        (any::<u32>(), any::<u64>(), version(), dimension()),
     )
         .prop_map(
-            |((id, timestamp_ns, guess, has_guess), (frontend, sequence, protocol, reserved))| Keyframe {
+            |((id, timestamp_ns, guess, has_guess), (frontend, sequence, protocol, dimension))| Keyframe {
                 id,
                 timestamp_ns,
                 guess,
@@ -92,7 +96,7 @@ fn keyframe() -> impl Strategy<Value = Keyframe> {
                 frontend,
                 sequence,
                 protocol,
-                reserved,
+                dimension,
             },
         )
 }
@@ -104,13 +108,18 @@ fn fix() -> impl Strategy<Value = GpsFix> {
             prop_oneof![-100.0..100.0f64, number()],
             prop_oneof![-200.0..200.0f64, number()],
         ),
-        (number(), [number(), number(), number(), number()], any::<u32>()),
+        (
+            number(),
+            [number(), number(), number(), number()],
+            number(),
+            any::<u32>(),
+        ),
         (any::<u32>(), any::<u64>(), version(), any::<u32>()),
     )
         .prop_map(
             |(
                 (keyframe, latitude, longitude),
-                (altitude, covariance, has_altitude),
+                (altitude, covariance, altitude_variance, has_altitude),
                 (frontend, sequence, protocol, reserved),
             )| GpsFix {
                 keyframe,
@@ -118,6 +127,7 @@ fn fix() -> impl Strategy<Value = GpsFix> {
                 longitude,
                 altitude,
                 covariance,
+                altitude_variance,
                 has_altitude,
                 frontend,
                 sequence,
@@ -261,10 +271,10 @@ proptest! {
     /// reason, addressed to its sender.
     #[test]
     fn any_edge_message_decodes_or_is_rejected(m in edge()) {
-        match edge_in(&m) {
+        match edge_in::<Pose2>(&m) {
             Ok((o, e)) => {
                 prop_assert_eq!((o.frontend, o.sequence), (m.frontend, m.sequence));
-                prop_assert_eq!(m.protocol, PROTOCOL_VERSION);
+                prop_assert_eq!((m.protocol, m.dimension), (PROTOCOL_VERSION, 2));
                 prop_assert!(e.measurement.is_finite() && e.from != e.to);
                 prop_assert!(Information::from_upper(e.information.upper()).is_ok());
             }
@@ -274,11 +284,27 @@ proptest! {
                 prop_assert!(!r.text().is_empty());
             }
         }
+        match edge_in::<Pose3>(&m) {
+            Ok((_, e)) => {
+                prop_assert_eq!((m.protocol, m.dimension), (PROTOCOL_VERSION, 3));
+                prop_assert!(e.measurement.is_finite() && e.from != e.to);
+                prop_assert!((e.measurement.rotation.norm() - 1.0).abs() < 1e-12);
+                prop_assert!(Information6::from_upper(e.information.upper()).is_ok());
+            }
+            Err(r) => {
+                prop_assert_eq!((r.frontend, r.sequence), (m.frontend, m.sequence));
+                prop_assert_ne!(r.reason(), RejectionReason::Unknown);
+            }
+        }
     }
 
     #[test]
     fn any_keyframe_message_decodes_or_is_rejected(m in keyframe()) {
-        match keyframe_in(&m) {
+        if let Ok((_, _, guess)) = keyframe_in::<Pose3>(&m) {
+            prop_assert_eq!(m.dimension, 3);
+            prop_assert!(guess.is_none_or(|g| g.is_finite()));
+        }
+        match keyframe_in::<Pose2>(&m) {
             Ok((o, id, guess)) => {
                 prop_assert_eq!((o.frontend, o.sequence, id), (m.frontend, m.sequence, m.id));
                 prop_assert!(guess.is_none_or(|g| g.is_finite()));
@@ -377,7 +403,7 @@ fn reframed(file: &[u8], body: &[u8]) -> Vec<u8> {
 fn check_map(bytes: &[u8]) {
     use slamd::store::MapFile;
     let path = Path::new("fuzz.map");
-    if let Ok(map) = MapFile::decode(path, bytes) {
+    if let Ok(map) = MapFile::<Pose2>::decode(path, bytes) {
         let config = slamd::engine::EngineConfig {
             background: false,
             ..slamd::engine::EngineConfig::default()
@@ -413,7 +439,7 @@ proptest! {
             let mut flipped = file.clone();
             let n = flipped.len();
             flipped[edits[0].0 % n] ^= 1 << (edits[0].1 % 8);
-            prop_assert!(slamd::store::MapFile::decode(Path::new("x"), &flipped).is_err() || flipped == *file);
+            prop_assert!(slamd::store::MapFile::<Pose2>::decode(Path::new("x"), &flipped).is_err() || flipped == *file);
             Ok(())
         })?;
     }
@@ -423,7 +449,7 @@ proptest! {
     /// the rest is cut with a reason.
     #[test]
     fn journals_take_arbitrary_bytes(bytes in prop::collection::vec(any::<u8>(), 0..400)) {
-        if let Ok(slamd::store::Record::Edge(_, e)) = slamd::store::Record::decode(&bytes) {
+        if let Ok(slamd::store::Record::Edge(_, e)) = slamd::store::Record::<Pose2>::decode(&bytes) {
             prop_assert!(e.measurement.is_finite());
             prop_assert!(Information::from_upper(e.information.upper()).is_ok());
         }
@@ -439,7 +465,7 @@ proptest! {
         let mut file = head.clone();
         file.extend_from_slice(&bytes);
         std::fs::write(&path, &file).unwrap();
-        let read = slamd::store::journal::read(&path).unwrap().expect("the file is there");
+        let read = slamd::store::journal::read::<Pose2>(&path).unwrap().expect("the file is there");
         prop_assert!(read.valid_len as usize <= file.len());
         prop_assert_eq!(read.cut.is_some(), (read.valid_len as usize) < file.len());
     }

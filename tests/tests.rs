@@ -11,3 +11,4 @@ mod incremental;
 mod outliers;
 mod restore;
 mod spatial;
+mod spatial_daemon;

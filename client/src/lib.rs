@@ -69,4 +69,6 @@ pub use slamd_protocol::transport::{
 pub use slamd_protocol::{
     Endpoint, Frontend, Pose, Rejection, RejectionReason, SnapshotHeader, Switch, SwitchesHeader,
 };
-pub use slamd_types::{EdgeInput, EdgeKind, FixInput, Geodetic, Information, KeyframeId, Pose2};
+pub use slamd_types::{
+    EdgeInput, EdgeKind, FixInput, Geodetic, Information, Information6, KeyframeId, Pose2, Pose3,
+};

@@ -148,6 +148,10 @@ impl Default for SnapshotConfig {
 pub struct Config {
     /// Service names live under this namespace.
     pub namespace: String,
+    /// The dimension of the graphs the daemon serves: 2 (planar poses
+    /// `x, y, θ`) or 3 (spatial poses, position and quaternion). A message
+    /// of the other dimension is refused.
+    pub dimension: u32,
     /// Log filter (tracing's `EnvFilter` syntax).
     pub log: String,
     /// Edges kept waiting for a keyframe that has not arrived.
@@ -170,6 +174,7 @@ impl Default for Config {
     fn default() -> Self {
         Self {
             namespace: DEFAULT_NAMESPACE.to_string(),
+            dimension: 2,
             log: "info".to_string(),
             held_edges: 100_000,
             held_timeout_s: 30.0,
@@ -240,6 +245,9 @@ impl Config {
                 "namespace `{}` must be 1-200 characters without spaces",
                 self.namespace
             ));
+        }
+        if !(2..=3).contains(&self.dimension) {
+            return bad(format!("dimension {} must be 2 or 3", self.dimension));
         }
         let i = &self.ipc;
         for (name, v) in [

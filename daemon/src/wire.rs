@@ -8,18 +8,28 @@ use crate::gps::Georef;
 use crate::graph::{GraphError, KeyframeId};
 use slamd_protocol::codec::{gps_reason, reject, Origin};
 use slamd_protocol::{Pose, Rejection, RejectionReason, Switch};
+use slamd_types::RigidMotion;
 
-/// Keyframe `id`'s pose `p` in the map frame, with its ENU pose when the
-/// map is georeferenced (zeros before).
-pub fn pose_out(id: KeyframeId, p: &Pose2, georef: Option<&Georef>) -> Pose {
-    let enu = georef.map_or(Pose2::new(0.0, 0.0, 0.0), |g| g.to_enu(p));
+/// Keyframe `id`'s pose `p` in the map frame, with its planar ENU pose
+/// when the map is georeferenced (zeros before).
+pub fn pose_out<P: RigidMotion>(id: KeyframeId, p: &P, georef: Option<&Georef>) -> Pose {
+    let [x, y, z] = p.position3();
+    let [qx, qy, qz, qw] = p.orientation();
+    let theta = p.heading();
+    let enu = georef.map_or(Pose2::new(0.0, 0.0, 0.0), |g| g.to_enu(&Pose2::new(x, y, theta)));
     Pose {
         id,
-        x: p.x,
-        y: p.y,
-        theta: p.theta,
+        x,
+        y,
+        z,
+        qx,
+        qy,
+        qz,
+        qw,
+        theta,
         east: enu.x,
         north: enu.y,
+        up: 0.0,
         heading: enu.theta,
     }
 }

@@ -12,11 +12,11 @@
 // built once per refusal, so its size in a Result does not matter.
 #![allow(clippy::result_large_err)]
 
-use crate::message::kind;
+use crate::message::{kind, INFORMATION_UPPER, POSE_PARAMS};
 use crate::{Edge, EdgeKindWire, GpsFix, Keyframe, Rejection, RejectionReason, PROTOCOL_VERSION};
 use slamd_types::{
-    check_covariance, EdgeInput, EdgeKind, FixInput, Geodetic, GpsError, Information, InformationError,
-    KeyframeId, Pose2,
+    check_covariance, EdgeInput, EdgeKind, FixInput, Geodetic, GpsError, InformationError, InformationMatrix,
+    KeyframeId, RigidMotion,
 };
 
 /// Who sent a message and its number.
@@ -47,34 +47,70 @@ fn check_version(o: Origin, message: u32, protocol: u32, ids: [u64; 2]) -> Resul
     }
 }
 
+/// Refuses a message written in another dimension than `P`'s.
+fn check_dimension<P: RigidMotion>(
+    o: Origin,
+    message: u32,
+    dimension: u32,
+    ids: [u64; 2],
+    what: &str,
+) -> Result<(), Rejection> {
+    if dimension == P::DIMENSION {
+        return Ok(());
+    }
+    let text = format!(
+        "{what} is {dimension}-D; this daemon serves {}-D graphs (its `dimension` setting)",
+        P::DIMENSION
+    );
+    Err(reject(o, message, RejectionReason::Dimension, ids, &text))
+}
+
+/// A pose written in `v`, or why not: a non-finite number, or (in space)
+/// a quaternion off unit norm.
+fn pose_in<P: RigidMotion>(v: &[f64; POSE_PARAMS]) -> Result<P, (RejectionReason, &'static str)> {
+    if v[..P::PARAMS].iter().any(|x| !x.is_finite()) {
+        return Err((RejectionReason::NonFinite, "has a non-finite number"));
+    }
+    P::from_params(v).ok_or((
+        RejectionReason::Other,
+        "has a quaternion that is not of unit norm",
+    ))
+}
+
 /// A keyframe message as the engine takes it: id and optional guess.
-pub fn keyframe_in(m: &Keyframe) -> Result<(Origin, KeyframeId, Option<Pose2>), Rejection> {
+pub fn keyframe_in<P: RigidMotion>(m: &Keyframe) -> Result<(Origin, KeyframeId, Option<P>), Rejection> {
     let o = Origin {
         frontend: m.frontend,
         sequence: m.sequence,
     };
-    check_version(o, kind::KEYFRAME, m.protocol, [m.id, 0])?;
-    let guess = (m.has_guess != 0).then(|| Pose2::new(m.guess[0], m.guess[1], m.guess[2]));
-    if guess.is_some_and(|g| !g.is_finite()) {
-        return Err(reject(
+    let ids = [m.id, 0];
+    check_version(o, kind::KEYFRAME, m.protocol, ids)?;
+    check_dimension::<P>(o, kind::KEYFRAME, m.dimension, ids, &format!("keyframe {}", m.id))?;
+    if m.has_guess == 0 {
+        return Ok((o, m.id, None));
+    }
+    match pose_in(&m.guess) {
+        Ok(guess) => Ok((o, m.id, Some(guess))),
+        Err((reason, why)) => Err(reject(
             o,
             kind::KEYFRAME,
-            RejectionReason::NonFinite,
-            [m.id, 0],
-            &format!("keyframe {}: guess has a non-finite coordinate", m.id),
-        ));
+            reason,
+            ids,
+            &format!("keyframe {}: guess {why}", m.id),
+        )),
     }
-    Ok((o, m.id, guess))
 }
 
 /// An edge message as the engine takes it.
-pub fn edge_in(m: &Edge) -> Result<(Origin, EdgeInput), Rejection> {
+pub fn edge_in<P: RigidMotion>(m: &Edge) -> Result<(Origin, EdgeInput<P>), Rejection> {
     let o = Origin {
         frontend: m.frontend,
         sequence: m.sequence,
     };
     let ids = [m.from, m.to];
     check_version(o, kind::EDGE, m.protocol, ids)?;
+    let what = format!("edge {}→{}", m.from, m.to);
+    check_dimension::<P>(o, kind::EDGE, m.dimension, ids, &what)?;
     let bad = |reason, text: String| Err(reject(o, kind::EDGE, reason, ids, &text));
     let kind = match EdgeKindWire::from_u32(m.kind) {
         Some(EdgeKindWire::Odometry) => EdgeKind::Odometry,
@@ -94,14 +130,17 @@ pub fn edge_in(m: &Edge) -> Result<(Origin, EdgeInput), Rejection> {
             format!("edge from keyframe {} to itself", m.from),
         );
     }
-    let measurement = Pose2::new(m.dx, m.dy, m.dtheta);
-    if !measurement.is_finite() {
-        return bad(
-            RejectionReason::NonFinite,
-            format!("edge {}→{}: non-finite measurement", m.from, m.to),
-        );
-    }
-    let information = match Information::from_upper(m.information) {
+    let measurement = match pose_in::<P>(&m.measurement) {
+        Ok(z) => z,
+        Err((RejectionReason::NonFinite, _)) => {
+            return bad(
+                RejectionReason::NonFinite,
+                format!("{what}: non-finite measurement"),
+            )
+        }
+        Err((reason, why)) => return bad(reason, format!("{what}: measurement {why}")),
+    };
+    let information = match P::Information::from_upper_slice(&m.information) {
         Ok(i) => i,
         Err(InformationError::NonFinite) => {
             return bad(
@@ -170,6 +209,7 @@ pub fn gps_out(f: &FixInput, o: Origin) -> GpsFix {
         longitude: f.position.lon,
         altitude: f.position.height,
         covariance: f.covariance,
+        altitude_variance: 0.0,
         has_altitude: 1,
         frontend: o.frontend,
         sequence: o.sequence,
@@ -178,29 +218,41 @@ pub fn gps_out(f: &FixInput, o: Origin) -> GpsFix {
     }
 }
 
+/// `p`'s numbers as the wire writes a pose.
+fn pose_out<P: RigidMotion>(p: &P) -> [f64; POSE_PARAMS] {
+    let mut v = [0.0; POSE_PARAMS];
+    p.write_params(&mut v);
+    v
+}
+
 /// A keyframe message from the frontend's side.
-pub fn keyframe_out(id: KeyframeId, timestamp_ns: u64, guess: Option<Pose2>, o: Origin) -> Keyframe {
+pub fn keyframe_out<P: RigidMotion>(
+    id: KeyframeId,
+    timestamp_ns: u64,
+    guess: Option<P>,
+    o: Origin,
+) -> Keyframe {
     Keyframe {
         id,
         timestamp_ns,
-        guess: guess.map_or([0.0; 3], |g| g.to_array()),
+        guess: guess.as_ref().map_or([0.0; POSE_PARAMS], pose_out),
         has_guess: u32::from(guess.is_some()),
         frontend: o.frontend,
         sequence: o.sequence,
         protocol: PROTOCOL_VERSION,
-        reserved: 0,
+        dimension: P::DIMENSION,
     }
 }
 
 /// An edge message from the frontend's side.
-pub fn edge_out(e: &EdgeInput, o: Origin) -> Edge {
+pub fn edge_out<P: RigidMotion>(e: &EdgeInput<P>, o: Origin) -> Edge {
+    let mut information = [0.0; INFORMATION_UPPER];
+    e.information.write_upper(&mut information);
     Edge {
         from: e.from,
         to: e.to,
-        dx: e.measurement.x,
-        dy: e.measurement.y,
-        dtheta: e.measurement.theta,
-        information: e.information.upper(),
+        measurement: pose_out(&e.measurement),
+        information,
         kind: match e.kind {
             EdgeKind::Odometry => EdgeKindWire::Odometry,
             EdgeKind::LoopClosure => EdgeKindWire::LoopClosure,
@@ -210,13 +262,14 @@ pub fn edge_out(e: &EdgeInput, o: Origin) -> Edge {
         frontend: o.frontend,
         sequence: o.sequence,
         protocol: PROTOCOL_VERSION,
-        reserved: 0,
+        dimension: P::DIMENSION,
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use slamd_types::{Information, Information6, Pose2, Pose3};
 
     fn edge() -> Edge {
         let input = EdgeInput::new(
@@ -278,7 +331,7 @@ mod tests {
 
     #[test]
     fn edges_round_trip() {
-        let (o, back) = edge_in(&edge()).unwrap();
+        let (o, back) = edge_in::<Pose2>(&edge()).unwrap();
         assert_eq!(
             o,
             Origin {
@@ -296,16 +349,16 @@ mod tests {
             EdgeKind::Other,
         ] {
             let sent = EdgeInput { kind, ..back };
-            assert_eq!(edge_in(&edge_out(&sent, o)).unwrap().1.kind, kind);
+            assert_eq!(edge_in::<Pose2>(&edge_out(&sent, o)).unwrap().1.kind, kind);
         }
     }
 
     #[test]
     fn hostile_edges_get_typed_reasons() {
         type Case = (fn(&mut Edge), RejectionReason, &'static str);
-        let cases: [Case; 6] = [
+        let cases: [Case; 7] = [
             (
-                |e| e.dx = f64::NAN,
+                |e| e.measurement[0] = f64::NAN,
                 RejectionReason::NonFinite,
                 "edge 1→2: non-finite measurement",
             ),
@@ -315,7 +368,7 @@ mod tests {
                 "edge 1→2: non-finite information",
             ),
             (
-                |e| e.information = [1.0, 5.0, 0.0, 1.0, 0.0, 1.0],
+                |e| e.information[..6].copy_from_slice(&[1.0, 5.0, 0.0, 1.0, 0.0, 1.0]),
                 RejectionReason::NotPositiveDefinite,
                 "edge 1→2: information matrix is not positive definite",
             ),
@@ -332,13 +385,18 @@ mod tests {
             (
                 |e| e.protocol = 99,
                 RejectionReason::ProtocolVersion,
-                "message speaks protocol 99, the daemon 3",
+                "message speaks protocol 99, the daemon 4",
+            ),
+            (
+                |e| e.dimension = 3,
+                RejectionReason::Dimension,
+                "edge 1→2 is 3-D; this daemon serves 2-D graphs (its `dimension` setting)",
             ),
         ];
         for (break_it, reason, text) in cases {
             let mut e = edge();
             break_it(&mut e);
-            let r = edge_in(&e).unwrap_err();
+            let r = edge_in::<Pose2>(&e).unwrap_err();
             assert_eq!((r.reason(), r.text()), (reason, text));
             assert_eq!((r.frontend, r.sequence), (7, 9));
         }
@@ -357,6 +415,63 @@ mod tests {
         );
         assert_eq!(keyframe_in(&k).unwrap().2, Some(Pose2::new(1.0, 2.0, 0.0)));
         k.guess[2] = f64::NAN;
-        assert_eq!(keyframe_in(&k).unwrap_err().reason(), RejectionReason::NonFinite);
+        assert_eq!(
+            keyframe_in::<Pose2>(&k).unwrap_err().reason(),
+            RejectionReason::NonFinite
+        );
+    }
+
+    #[test]
+    fn spatial_messages_round_trip_and_are_checked() {
+        let o = Origin {
+            frontend: 2,
+            sequence: 5,
+        };
+        let z = Pose3::from_xyz_rpy([1.0, -2.0, 0.5, 0.1, -0.2, 0.3]);
+        let info = Information6::identity().scaled(4.0);
+        let sent = EdgeInput::new(3, 8, z, info, EdgeKind::LoopClosure);
+        let m = edge_out(&sent, o);
+        assert_eq!(m.dimension, 3);
+        let (_, back) = edge_in::<Pose3>(&m).unwrap();
+        assert!((back.measurement.translation - z.translation).norm() < 1e-15);
+        assert!(back.measurement.rotation.angle_to(&z.rotation) < 1e-12);
+        assert_eq!(back.information, info);
+        // a 3-D edge at a 2-D daemon, and the other way round
+        let r = edge_in::<Pose2>(&m).unwrap_err();
+        assert_eq!(r.reason(), RejectionReason::Dimension);
+        assert_eq!(
+            r.text(),
+            "edge 3→8 is 3-D; this daemon serves 2-D graphs (its `dimension` setting)"
+        );
+        let k = keyframe_out(4, 0, Some(Pose2::new(1.0, 2.0, 0.0)), o);
+        assert_eq!(
+            keyframe_in::<Pose3>(&k).unwrap_err().text(),
+            "keyframe 4 is 2-D; this daemon serves 3-D graphs (its `dimension` setting)"
+        );
+        // a quaternion far from unit norm is refused, not normalised
+        let mut bad = m;
+        bad.measurement[6] = 3.0;
+        let r = edge_in::<Pose3>(&bad).unwrap_err();
+        assert_eq!(
+            r.text(),
+            "edge 3→8: measurement has a quaternion that is not of unit norm"
+        );
+        let mut k = keyframe_out(6, 0, Some(z), o);
+        assert_eq!(
+            keyframe_in::<Pose3>(&k).unwrap().2.map(|g| g.translation),
+            Some(z.translation)
+        );
+        k.guess[4] = f64::NAN;
+        assert_eq!(
+            keyframe_in::<Pose3>(&k).unwrap_err().reason(),
+            RejectionReason::NonFinite
+        );
+        // an indefinite 6×6 information
+        let mut bad = m;
+        bad.information[20] = -1.0;
+        assert_eq!(
+            edge_in::<Pose3>(&bad).unwrap_err().reason(),
+            RejectionReason::NotPositiveDefinite
+        );
     }
 }

@@ -13,7 +13,7 @@
 use crate::codec::{edge_out, gps_out, keyframe_out, Origin};
 use crate::message::{Edge, GpsFix, Keyframe};
 use crate::transport::{FrontendLink, TransportError};
-use slamd_types::{EdgeInput, FixInput, KeyframeId, Pose2};
+use slamd_types::{EdgeInput, FixInput, KeyframeId, Pose2, Pose3, RigidMotion};
 use std::collections::VecDeque;
 use std::sync::atomic::{AtomicU32, Ordering};
 use std::time::{Duration, Instant};
@@ -138,19 +138,54 @@ impl Frontend {
         self.resent
     }
 
-    /// Publishes a keyframe; returns its message number.
+    /// Publishes a planar keyframe (to a 2-D daemon); returns its message
+    /// number.
     pub fn add_keyframe(
         &mut self,
         id: KeyframeId,
         timestamp_ns: u64,
         guess: Option<Pose2>,
     ) -> Result<u64, TransportError> {
+        self.publish_keyframe(id, timestamp_ns, guess)
+    }
+
+    /// Publishes a planar edge (to a 2-D daemon); returns its message
+    /// number.
+    pub fn add_edge(&mut self, edge: &EdgeInput) -> Result<u64, TransportError> {
+        self.publish_edge(edge)
+    }
+
+    /// Publishes a spatial keyframe (to a 3-D daemon); returns its message
+    /// number.
+    pub fn add_keyframe3(
+        &mut self,
+        id: KeyframeId,
+        timestamp_ns: u64,
+        guess: Option<Pose3>,
+    ) -> Result<u64, TransportError> {
+        self.publish_keyframe(id, timestamp_ns, guess)
+    }
+
+    /// Publishes a spatial edge (to a 3-D daemon); returns its message
+    /// number.
+    pub fn add_edge3(&mut self, edge: &EdgeInput<Pose3>) -> Result<u64, TransportError> {
+        self.publish_edge(edge)
+    }
+
+    /// Publishes a keyframe of either dimension; returns its message
+    /// number.
+    pub fn publish_keyframe<P: RigidMotion>(
+        &mut self,
+        id: KeyframeId,
+        timestamp_ns: u64,
+        guess: Option<P>,
+    ) -> Result<u64, TransportError> {
         let o = self.next();
         self.send(Outgoing::Keyframe(keyframe_out(id, timestamp_ns, guess, o)))
     }
 
-    /// Publishes an edge; returns its message number.
-    pub fn add_edge(&mut self, edge: &EdgeInput) -> Result<u64, TransportError> {
+    /// Publishes an edge of either dimension; returns its message number.
+    pub fn publish_edge<P: RigidMotion>(&mut self, edge: &EdgeInput<P>) -> Result<u64, TransportError> {
         let o = self.next();
         self.send(Outgoing::Edge(edge_out(edge, o)))
     }

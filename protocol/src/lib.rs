@@ -33,6 +33,6 @@ pub mod transport;
 pub use frontend::{Endpoint, Frontend};
 pub use message::{
     DaemonStatus, Edge, EdgeKindWire, FrontendAck, GpsFix, Keyframe, Pose, Rejection, RejectionReason,
-    SnapshotHeader, Switch, SwitchesHeader, MAX_FRONTENDS, PROTOCOL_VERSION,
+    SnapshotHeader, Switch, SwitchesHeader, INFORMATION_UPPER, MAX_FRONTENDS, POSE_PARAMS, PROTOCOL_VERSION,
 };
 pub use service::ServiceNames;

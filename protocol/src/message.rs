@@ -11,7 +11,15 @@
 use iceoryx2::prelude::*;
 
 /// The layout version of every message below. Bump it on any change.
-pub const PROTOCOL_VERSION: u32 = 3;
+pub const PROTOCOL_VERSION: u32 = 4;
+
+/// Numbers that write a pose in [`Keyframe::guess`] and [`Edge::measurement`]:
+/// the first 3 in the plane, all 7 in space.
+pub const POSE_PARAMS: usize = 7;
+
+/// Entries of an information matrix in [`Edge::information`]: the first 6
+/// in the plane, all 21 in space.
+pub const INFORMATION_UPPER: usize = 21;
 
 /// Frontends whose progress a snapshot header reports.
 pub const MAX_FRONTENDS: usize = 8;
@@ -52,8 +60,10 @@ pub struct Keyframe {
     pub id: u64,
     /// When it was taken (ns, the frontend's clock).
     pub timestamp_ns: u64,
-    /// Initial pose `(x, y, θ)` in the map frame, valid if `has_guess != 0`.
-    pub guess: [f64; 3],
+    /// Initial pose in the map frame, valid if `has_guess != 0`: in the
+    /// plane `(x, y, θ)` (m, m, rad) then zeros; in space `(x, y, z, qx,
+    /// qy, qz, qw)` (m; a unit quaternion, REP-103 axes).
+    pub guess: [f64; POSE_PARAMS],
     /// 1 when `guess` is set.
     pub has_guess: u32,
     /// The sending frontend.
@@ -62,8 +72,8 @@ pub struct Keyframe {
     pub sequence: u64,
     /// [`PROTOCOL_VERSION`] of the sender.
     pub protocol: u32,
-    /// Zero.
-    pub reserved: u32,
+    /// 2 or 3: the dimension `guess` is written in and the daemon must serve.
+    pub dimension: u32,
 }
 
 /// A relative-pose measurement `T_ij` with its information matrix.
@@ -75,14 +85,12 @@ pub struct Edge {
     pub from: u64,
     /// Keyframe `j`.
     pub to: u64,
-    /// `T_ij` translation x (m).
-    pub dx: f64,
-    /// `T_ij` translation y (m).
-    pub dy: f64,
-    /// `T_ij` rotation (rad).
-    pub dtheta: f64,
-    /// Ω's upper triangle in g2o order: xx, xy, xθ, yy, yθ, θθ.
-    pub information: [f64; 6],
+    /// `T_ij`, written as [`Keyframe::guess`] is.
+    pub measurement: [f64; POSE_PARAMS],
+    /// Ω's upper triangle row by row, in g2o order: in the plane the first
+    /// 6 over `(x, y, θ)`; in space all 21 over `(x, y, z, qx, qy, qz)`,
+    /// the error of g2o's EdgeSE3.
+    pub information: [f64; INFORMATION_UPPER],
     /// An [`EdgeKindWire`] as `u32`.
     pub kind: u32,
     /// The sending frontend.
@@ -91,8 +99,8 @@ pub struct Edge {
     pub sequence: u64,
     /// [`PROTOCOL_VERSION`] of the sender.
     pub protocol: u32,
-    /// Zero.
-    pub reserved: u32,
+    /// 2 or 3, as in [`Keyframe::dimension`].
+    pub dimension: u32,
 }
 
 /// A GPS fix attached to a keyframe.
@@ -110,7 +118,10 @@ pub struct GpsFix {
     pub altitude: f64,
     /// Covariance of (east, north) in m², row-major 2×2.
     pub covariance: [f64; 4],
-    /// 1 when `altitude` is set.
+    /// Variance of the altitude (m²), valid if `has_altitude != 0`: a 3-D
+    /// daemon constrains the keyframe's height with it.
+    pub altitude_variance: f64,
+    /// 1 when `altitude` and `altitude_variance` are set.
     pub has_altitude: u32,
     /// The sending frontend.
     pub frontend: u32,
@@ -122,7 +133,9 @@ pub struct GpsFix {
     pub reserved: u32,
 }
 
-/// One pose of a snapshot.
+/// One pose of a snapshot, in the map frame (REP-103: x forward, y left,
+/// z up). Both dimensions fill every field: a planar pose has `z = 0` and
+/// the quaternion of its heading; a spatial pose's `theta` is its yaw.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
 #[type_name("slamd::Pose")]
@@ -133,14 +146,40 @@ pub struct Pose {
     pub x: f64,
     /// Map-frame y (m).
     pub y: f64,
-    /// Map-frame heading (rad).
+    /// Map-frame z (m).
+    pub z: f64,
+    /// Orientation, a unit quaternion with `qw ≥ 0`: x part.
+    pub qx: f64,
+    /// y part.
+    pub qy: f64,
+    /// z part.
+    pub qz: f64,
+    /// Real part.
+    pub qw: f64,
+    /// Heading, the rotation about z (rad): in the plane the pose's own
+    /// angle, in space the yaw of `R = R_z(yaw) R_y(pitch) R_x(roll)`.
     pub theta: f64,
     /// East of the geodetic origin (m), when the header says georeferenced.
     pub east: f64,
     /// North of the geodetic origin (m), when georeferenced.
     pub north: f64,
+    /// Up from the geodetic origin (m), when georeferenced (0 in the plane).
+    pub up: f64,
     /// Heading from east, counter-clockwise (rad), when georeferenced.
     pub heading: f64,
+}
+
+impl Pose {
+    /// The planar pose `(x, y, θ)` (what a 2-D daemon solved).
+    pub fn pose2(&self) -> slamd_types::Pose2 {
+        slamd_types::Pose2::new(self.x, self.y, self.theta)
+    }
+
+    /// The spatial pose (what a 3-D daemon solved); `None` if a number is
+    /// not finite or the quaternion is not of unit norm.
+    pub fn pose3(&self) -> Option<slamd_types::Pose3> {
+        slamd_types::Pose3::from_xyz_quaternion([self.x, self.y, self.z, self.qx, self.qy, self.qz, self.qw])
+    }
 }
 
 /// The outlier filter's current weight of one loop closure.
@@ -248,8 +287,8 @@ impl DaemonStatus {
 pub struct SnapshotHeader {
     /// [`PROTOCOL_VERSION`] of the daemon.
     pub protocol: u32,
-    /// Zero.
-    pub reserved: u32,
+    /// The dimension the daemon serves: 2 or 3.
+    pub dimension: u32,
     /// Increases with every snapshot of one daemon start (a restarted
     /// daemon counts again; its status names the start).
     pub version: u64,
@@ -317,6 +356,8 @@ pub enum RejectionReason {
     HeldOverflow = 9,
     /// Any other refusal; see the text.
     Other = 10,
+    /// A message of the other dimension: each daemon serves one.
+    Dimension = 11,
     /// A code this build does not know.
     Unknown = 0,
 }
@@ -335,6 +376,7 @@ impl RejectionReason {
             8 => Self::OutOfRange,
             9 => Self::HeldOverflow,
             10 => Self::Other,
+            11 => Self::Dimension,
             _ => Self::Unknown,
         }
     }
@@ -438,8 +480,10 @@ mod tests {
 
     #[test]
     fn layouts_are_what_the_protocol_says() {
-        assert_eq!(std::mem::size_of::<Edge>(), 112);
-        assert_eq!(std::mem::size_of::<Pose>(), 56);
+        assert_eq!(std::mem::size_of::<Keyframe>(), 96);
+        assert_eq!(std::mem::size_of::<Edge>(), 264);
+        assert_eq!(std::mem::size_of::<GpsFix>(), 96);
+        assert_eq!(std::mem::size_of::<Pose>(), 104);
         assert_eq!(std::mem::align_of::<SnapshotHeader>(), 8);
     }
 }

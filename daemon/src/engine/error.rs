@@ -25,6 +25,8 @@ pub enum EngineError {
     FixKeyframe(KeyframeId),
     /// A saved map could not be taken up.
     Restore(String),
+    /// Something this dimension's engine does not do.
+    Unsupported(&'static str),
 }
 
 impl fmt::Display for EngineError {
@@ -38,6 +40,7 @@ impl fmt::Display for EngineError {
             EngineError::Gps(e) => e.fmt(f),
             EngineError::FixKeyframe(id) => write!(f, "GPS fix for unknown keyframe {id}"),
             EngineError::Restore(e) => write!(f, "cannot restore the map: {e}"),
+            EngineError::Unsupported(what) => f.write_str(what),
         }
     }
 }

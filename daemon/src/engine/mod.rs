@@ -442,8 +442,8 @@ impl<P: EnginePose> Engine<P> {
     }
 }
 
-/// What only the planar engine has so far: saved maps and GPS.
-impl Engine {
+/// Saved maps and GPS.
+impl<P: EnginePose> Engine<P> {
     /// An engine holding `map`: its keyframes, edges with their weights
     /// and switches, fixes and georeference, the factor built once at the
     /// saved linearisation point. With `polish` (keyframes or edges that
@@ -452,10 +452,10 @@ impl Engine {
     /// configured one (its fixes are relative to it).
     pub fn restore(
         config: EngineConfig,
-        map: &crate::store::MapFile,
+        map: &crate::store::MapFile<P>,
         polish: bool,
     ) -> Result<Self, EngineError> {
-        let mut engine = Engine::new(config);
+        let mut engine = Self::create(config);
         if let Some(o) = map.origin {
             if engine.frame.is_some_and(|f| f.origin != o) {
                 tracing::warn!(?o, "The saved map has its own GPS origin; using it.");
@@ -486,7 +486,7 @@ impl Engine {
     /// The map as it stands: keyframes, edges with their weights and
     /// switches, the estimate, the GPS origin, fixes and georeference.
     /// Edge origins, acknowledgements and held messages are left empty.
-    pub fn map(&self) -> crate::store::MapFile {
+    pub fn map(&self) -> crate::store::MapFile<P> {
         restore::map_of(&self.state, self.gps_origin(), &self.fixes)
     }
 
@@ -495,8 +495,12 @@ impl Engine {
     /// ENU origin unless the configuration names one. Fixes enter the
     /// estimate as absolute position priors once a re-solve has
     /// georeferenced the map; one starts as soon as two fixes are in, and
-    /// again whenever their number has doubled.
+    /// again whenever their number has doubled. A 3-D engine refuses fixes
+    /// ([`EngineError::Unsupported`]).
     pub fn add_gps(&mut self, fix: FixInput) -> Result<(), EngineError> {
+        if P::DIMENSION != 2 {
+            return Err(EngineError::Unsupported("GPS fixes constrain 2-D maps only"));
+        }
         let p = fix.position;
         let position = Geodetic::new(p.lat, p.lon, p.height).map_err(EngineError::Gps)?;
         let cov = covariance(fix.covariance).map_err(EngineError::Gps)?;
@@ -512,7 +516,9 @@ impl Engine {
         self.fixes.push(fix);
         Ok(())
     }
+}
 
+impl Engine {
     /// The exact two-stage linear solution of everything so far (needs
     /// `linear_stages`), indexed like the keyframes.
     pub fn linear_solution(&mut self) -> Option<Vec<Pose2>> {

@@ -17,8 +17,7 @@ use super::model::{EdgeState, Model};
 use super::op::Polish;
 use super::rebuild::{factorise, rebuild};
 use super::state::State;
-use super::{EngineConfig, EngineError, FixInput};
-use crate::geometry::Pose2;
+use super::{EngineConfig, EngineError, EnginePose, FixInput};
 use crate::gps::{covariance, Geodetic, GpsFix, LocalFrame};
 use crate::store::{MapEdge, MapFile, MapKeyframe, SavedGeoref};
 use faer::c64;
@@ -26,12 +25,12 @@ use std::collections::VecDeque;
 
 /// The state of `map`'s graph, with its GPS fixes in `frame`, polished
 /// as `polish` says before the factor is built.
-pub(super) fn state_of(
-    map: &MapFile,
+pub(super) fn state_of<P: EnginePose>(
+    map: &MapFile<P>,
     frame: Option<LocalFrame>,
     polish: Polish,
     config: &EngineConfig,
-) -> Result<State, EngineError> {
+) -> Result<State<P>, EngineError> {
     let mut model = Model::default();
     let mut lin = Vec::with_capacity(map.keyframes.len());
     for k in &map.keyframes {
@@ -73,7 +72,7 @@ pub(super) fn state_of(
 /// joined keyframes and makes the others wait. A keyframe the map had not
 /// joined starts at its guess, else composed from the keyframe it joins
 /// through.
-fn join(model: &mut Model, lin: &mut [Pose2], map: &MapFile) {
+fn join<P: EnginePose>(model: &mut Model<P>, lin: &mut [P], map: &MapFile<P>) {
     let n = model.graph.len();
     if n == 0 {
         return;
@@ -123,7 +122,11 @@ fn join(model: &mut Model, lin: &mut [Pose2], map: &MapFile) {
 
 /// A fix as the engine holds it: its keyframe's index, ENU position and
 /// covariance.
-fn fix_of(f: &FixInput, model: &Model, frame: Option<LocalFrame>) -> Result<GpsFix, EngineError> {
+fn fix_of<P: EnginePose>(
+    f: &FixInput,
+    model: &Model<P>,
+    frame: Option<LocalFrame>,
+) -> Result<GpsFix, EngineError> {
     let p = f.position;
     let position = Geodetic::new(p.lat, p.lon, p.height).map_err(EngineError::Gps)?;
     let cov = covariance(f.covariance).map_err(EngineError::Gps)?;
@@ -139,7 +142,11 @@ fn fix_of(f: &FixInput, model: &Model, frame: Option<LocalFrame>) -> Result<GpsF
 
 /// The map `state` holds (its edges' origins, the acknowledgements and
 /// the held messages are the daemon's to fill in).
-pub(super) fn map_of(state: &State, origin: Option<Geodetic>, fixes: &[FixInput]) -> MapFile {
+pub(super) fn map_of<P: EnginePose>(
+    state: &State<P>,
+    origin: Option<Geodetic>,
+    fixes: &[FixInput],
+) -> MapFile<P> {
     let m = &state.model;
     let (estimate, lin) = (state.estimate(), state.linearisation());
     // the linearisation covers the keyframes up to the newest joined one: a

@@ -196,7 +196,21 @@ pub fn read_any_graph_with(
 ) -> Result<(AnyGraph, Vec<ReadError>), ReadError> {
     let bytes = std::fs::read(path).map_err(|e| ReadError::io(path, e))?;
     if MapFile::sniff(&bytes) {
-        return read_graph_with(path, on_invalid).map(|(g, s)| (AnyGraph::Planar(g), s));
+        let map_error = |e: crate::store::StoreError| ReadError {
+            path: path.to_owned(),
+            line: None,
+            kind: ReadErrorKind::Map(e.to_string()),
+        };
+        return match MapFile::<Pose2>::decode(path, &bytes) {
+            Ok(map) => map.graph().map(AnyGraph::Planar),
+            Err(crate::store::StoreError::Dimension { .. }) => {
+                let map = MapFile::<Pose3>::decode(path, &bytes).map_err(map_error)?;
+                map.graph().map(AnyGraph::Spatial)
+            }
+            Err(e) => return Err(map_error(e)),
+        }
+        .map(|g| (g, Vec::new()))
+        .map_err(|e| ReadError::graph(path, e));
     }
     let text = String::from_utf8(bytes)
         .map_err(|e| ReadError::io(path, std::io::Error::new(std::io::ErrorKind::InvalidData, e)))?;

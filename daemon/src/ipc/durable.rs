@@ -11,33 +11,31 @@
 
 use super::acks::Acks;
 use super::engine_loop::EngineLoop;
-use crate::engine::{Engine, EngineError};
-use crate::geometry::Pose2;
+use crate::engine::{Engine, EngineError, EnginePose};
 use crate::store::{Cut, MapEdge, MapFile, MapKeyframe, Record, StateDir};
 use slamd_types::{check_covariance, KeyframeId};
 use std::collections::{HashMap, HashSet};
 use std::time::{Duration, Instant};
 
 /// What the engine thread starts from.
-#[derive(Default)]
-pub struct Start {
+pub struct Start<P: EnginePose> {
     /// The state directory, opened.
     pub store: Option<StateDir>,
     /// The map to continue: the directory's checkpoint or `--map`.
-    pub map: Option<MapFile>,
+    pub map: Option<MapFile<P>>,
     /// The journal's records after the map.
-    pub tail: Vec<Record>,
+    pub tail: Vec<Record<P>>,
     /// Where the journal was cut.
     pub cut: Option<Cut>,
 }
 
-impl EngineLoop {
+impl<P: EnginePose> EngineLoop<P> {
     /// Takes up `start`: the journal's tail is folded into the map as the
     /// daemon would have applied it (a repeated keyframe refused, an edge
     /// or fix held until its keyframe is there), then the engine is built
     /// from the whole in one step, polished once when the tail added
     /// anything. Nothing is journaled again.
-    pub fn take_up(&mut self, start: Start) -> Result<(), EngineError> {
+    pub fn take_up(&mut self, start: Start<P>) -> Result<(), EngineError> {
         let t0 = Instant::now();
         self.store = start.store;
         if let Some(cut) = &start.cut {
@@ -163,18 +161,18 @@ impl EngineLoop {
 
 /// Journal records folded into a map as the engine thread would have
 /// applied them one by one.
-struct Fold {
+struct Fold<P: EnginePose> {
     ids: HashSet<KeyframeId>,
     /// Edges and fixes waiting for a keyframe, by its id.
-    waiting: HashMap<KeyframeId, Vec<Record>>,
+    waiting: HashMap<KeyframeId, Vec<Record<P>>>,
     /// Still waiting at the end.
-    held: Vec<Record>,
+    held: Vec<Record<P>>,
     /// Records the engine would have refused.
     refused: u64,
 }
 
-impl Fold {
-    fn new(map: &MapFile) -> Self {
+impl<P: EnginePose> Fold<P> {
+    fn new(map: &MapFile<P>) -> Self {
         Self {
             ids: map.keyframes.iter().map(|k| k.id).collect(),
             waiting: HashMap::new(),
@@ -183,14 +181,14 @@ impl Fold {
         }
     }
 
-    fn record(&mut self, map: &mut MapFile, r: Record) {
+    fn record(&mut self, map: &mut MapFile<P>, r: Record<P>) {
         match r {
             Record::Keyframe(_, id, guess) => {
                 if !self.ids.insert(id) {
                     self.refused += 1;
                     return;
                 }
-                let at = guess.unwrap_or(Pose2::IDENTITY);
+                let at = guess.unwrap_or(P::IDENTITY);
                 map.keyframes.push(MapKeyframe {
                     id,
                     guess,

@@ -6,8 +6,7 @@ use super::acks::Acks;
 use super::health::Latency;
 use super::held::{Held, Waiting};
 use crate::config::Config;
-use crate::engine::{EdgeInput, Engine, EngineError, FixInput};
-use crate::geometry::Pose2;
+use crate::engine::{EdgeInput, Engine, EngineError, EnginePose, FixInput};
 use crate::graph::{EdgeKind, GraphError, KeyframeId};
 use crate::outliers::REJECTED_BELOW;
 use crate::store::{Record, StateDir};
@@ -22,13 +21,13 @@ use slamd_protocol::{
 };
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
-/// What the IPC thread hands over.
+/// What the IPC thread hands over; `P` is the pose type the daemon serves.
 #[derive(Clone, Debug)]
-pub enum Msg {
+pub enum Msg<P: EnginePose> {
     /// A checked keyframe.
-    Keyframe(Origin, KeyframeId, Option<Pose2>),
+    Keyframe(Origin, KeyframeId, Option<P>),
     /// A checked edge.
-    Edge(Origin, EdgeInput),
+    Edge(Origin, EdgeInput<P>),
     /// A checked GPS fix.
     Gps(Origin, FixInput),
     /// A message refused on arrival; publish and count it.
@@ -63,10 +62,10 @@ pub struct Counters {
 }
 
 /// The engine thread's state.
-pub struct EngineLoop {
-    pub(super) engine: Engine,
+pub struct EngineLoop<P: EnginePose> {
+    pub(super) engine: Engine<P>,
     outlet: Outlet,
-    pub(super) held: Held<EdgeInput>,
+    pub(super) held: Held<EdgeInput<P>>,
     pub(super) held_fixes: Held<FixInput>,
     pub(super) config: Config,
     pub(super) counters: Counters,
@@ -107,10 +106,10 @@ pub struct EngineLoop {
     new_loop_closure: bool,
 }
 
-impl EngineLoop {
+impl<P: EnginePose> EngineLoop<P> {
     pub fn new(config: Config, outlet: Outlet) -> Self {
         Self {
-            engine: Engine::new(config.engine()),
+            engine: Engine::create(config.engine()),
             outlet,
             held: Held::default(),
             held_fixes: Held::default(),
@@ -127,7 +126,12 @@ impl EngineLoop {
             checkpoint_at_ns: 0,
             batch_start: None,
             latency: Latency::default(),
-            last_header: SnapshotHeader::default(),
+            // the status says which dimension is served before any snapshot
+            last_header: SnapshotHeader {
+                protocol: PROTOCOL_VERSION,
+                dimension: P::DIMENSION,
+                ..SnapshotHeader::default()
+            },
             dirty: false,
             last_publish: None,
             last_input: Instant::now(),
@@ -139,7 +143,7 @@ impl EngineLoop {
 
     /// Runs until [`Msg::Shutdown`] or the channel closes. Each wake
     /// applies every message already queued, then publishes once.
-    pub fn run(mut self, rx: Receiver<Msg>) -> Counters {
+    pub fn run(mut self, rx: Receiver<Msg<P>>) -> Counters {
         let tick = Duration::from_millis(self.config.ipc.tick_ms);
         // frontends learn at once that this daemon serves them
         self.publish_status();
@@ -200,7 +204,7 @@ impl EngineLoop {
     }
 
     /// Applies one message; `false` means stop.
-    fn handle(&mut self, msg: Msg) -> bool {
+    fn handle(&mut self, msg: Msg<P>) -> bool {
         match msg {
             Msg::Keyframe(o, id, guess) => self.take(Record::Keyframe(o, id, guess)),
             Msg::Edge(o, edge) => self.take(Record::Edge(o, edge)),
@@ -226,7 +230,7 @@ impl EngineLoop {
 
     /// Takes one message in: acknowledged, journaled, applied; dropped if
     /// it repeats one taken before.
-    fn take(&mut self, r: Record) {
+    fn take(&mut self, r: Record<P>) {
         if self.admit(r) {
             self.last_input = Instant::now();
             self.idle_due = true;
@@ -235,7 +239,7 @@ impl EngineLoop {
     }
 
     /// Records `r` as taken and journals it; false for a duplicate.
-    pub(super) fn admit(&mut self, r: Record) -> bool {
+    pub(super) fn admit(&mut self, r: Record<P>) -> bool {
         if !self.acks.take(r.origin()) {
             self.counters.duplicates += 1;
             return false;
@@ -248,7 +252,7 @@ impl EngineLoop {
     }
 
     /// Applies a message taken in.
-    fn apply(&mut self, r: Record) {
+    fn apply(&mut self, r: Record<P>) {
         match r {
             Record::Keyframe(o, id, guess) => match self.engine.add_keyframe(id, guess) {
                 Ok(_) => {
@@ -269,7 +273,7 @@ impl EngineLoop {
     }
 
     /// Adds an edge, or holds it while one of its keyframes is missing.
-    pub(super) fn add_edge(&mut self, o: Origin, edge: EdgeInput, since: Instant) {
+    pub(super) fn add_edge(&mut self, o: Origin, edge: EdgeInput<P>, since: Instant) {
         match self.engine.add_edge(edge) {
             Ok(_) => {
                 self.counters.edges += 1;
@@ -412,7 +416,7 @@ impl EngineLoop {
         let snap = self.engine.snapshot();
         let header = SnapshotHeader {
             protocol: PROTOCOL_VERSION,
-            reserved: 0,
+            dimension: P::DIMENSION,
             version: snap.version,
             poses: 0,
             chi2: snap.chi2,

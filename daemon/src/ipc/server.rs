@@ -3,7 +3,8 @@
 use super::durable::Start;
 use super::engine_loop::{Counters, EngineLoop, Msg};
 use crate::config::Config;
-use crate::engine::EngineError;
+use crate::engine::{EngineError, EnginePose};
+use crate::graph::Pose3;
 use crate::store::{MapFile, StateDir, StoreError};
 use crossbeam::channel;
 use slamd_protocol::codec as wire;
@@ -27,6 +28,13 @@ pub enum ServeError {
     Restore(EngineError),
     /// `--map` given with a state directory that already holds a map.
     TwoMaps(std::path::PathBuf),
+    /// A map of another dimension than the configured one.
+    Dimension {
+        /// The map's.
+        map: u32,
+        /// The configuration's.
+        configured: u32,
+    },
 }
 
 impl fmt::Display for ServeError {
@@ -40,6 +48,10 @@ impl fmt::Display for ServeError {
                 f,
                 "the state directory {} already holds a map; continue it without --map, or give an empty directory",
                 dir.display()
+            ),
+            ServeError::Dimension { map, configured } => write!(
+                f,
+                "the map is {map}-D, but the daemon is configured for {configured}-D graphs (`dimension`)"
             ),
         }
     }
@@ -63,18 +75,34 @@ pub fn serve(config: &Config) -> Result<Counters, ServeError> {
     serve_until(config, &AtomicBool::new(false))
 }
 
-/// [`serve`], also stopping within a tick once `stop` is set.
+/// [`serve`], also stopping within a tick once `stop` is set. The
+/// configuration's `dimension` picks the pose type.
 pub fn serve_until(config: &Config, stop: &AtomicBool) -> Result<Counters, ServeError> {
-    serve_map(config, None, stop)
+    match config.dimension {
+        3 => serve_map::<Pose3>(config, None, stop),
+        _ => serve_map::<crate::geometry::Pose2>(config, None, stop),
+    }
 }
 
-/// [`serve_until`], continuing `map` (`slamd run --map`) when given.
+/// [`serve_until`] on poses `P`, continuing `map` (`slamd run --map`) when
+/// given. `P` must be of the configured dimension.
 ///
 /// With `state.dir` set, the directory is opened first (locked, its map
 /// and journal read, a torn journal tail cut off): a directory that cannot
-/// be written is an error here. The engine thread takes up the saved map
-/// and the journal's tail before the first snapshot.
-pub fn serve_map(config: &Config, map: Option<MapFile>, stop: &AtomicBool) -> Result<Counters, ServeError> {
+/// be written, or that holds a map of the other dimension, is an error
+/// here. The engine thread takes up the saved map and the journal's tail
+/// before the first snapshot.
+pub fn serve_map<P: EnginePose>(
+    config: &Config,
+    map: Option<MapFile<P>>,
+    stop: &AtomicBool,
+) -> Result<Counters, ServeError> {
+    if P::DIMENSION != config.dimension {
+        return Err(ServeError::Dimension {
+            map: P::DIMENSION,
+            configured: config.dimension,
+        });
+    }
     let start = open_state(config, map)?;
     if let Some(cpu) = config.ipc.cpu {
         if !crate::affinity::reserve_current_thread(cpu) {
@@ -88,7 +116,7 @@ pub fn serve_map(config: &Config, map: Option<MapFile>, stop: &AtomicBool) -> Re
         cleaned_dead_nodes = ingress.cleaned_at_start(),
         "slamd serving."
     );
-    let (tx, rx) = channel::unbounded::<Msg>();
+    let (tx, rx) = channel::unbounded::<Msg<P>>();
     let (ready_tx, ready_rx) = channel::bounded::<Result<(), ServeError>>(1);
     let engine_config = config.clone();
     let resolved = tx.clone();
@@ -106,7 +134,7 @@ pub fn serve_map(config: &Config, map: Option<MapFile>, stop: &AtomicBool) -> Re
                     return Counters::default();
                 }
             };
-            let mut engine_loop = EngineLoop::new(engine_config, outlet);
+            let mut engine_loop = EngineLoop::<P>::new(engine_config, outlet);
             // a finished re-solve is published at once, not at the next tick
             engine_loop.engine.wake_on_resolved(move || {
                 let _ = resolved.send(Msg::Resolved);
@@ -131,11 +159,11 @@ pub fn serve_map(config: &Config, map: Option<MapFile>, stop: &AtomicBool) -> Re
     let tick = Duration::from_millis(config.ipc.tick_ms);
     let exit = ingress.run(tick, |wake| {
         let msg = match wake {
-            Wake::Input(Input::Keyframe(m)) => match wire::keyframe_in(&m) {
+            Wake::Input(Input::Keyframe(m)) => match wire::keyframe_in::<P>(&m) {
                 Ok((o, id, guess)) => Msg::Keyframe(o, id, guess),
                 Err(r) => Msg::Rejected(r),
             },
-            Wake::Input(Input::Edge(m)) => match wire::edge_in(&m) {
+            Wake::Input(Input::Edge(m)) => match wire::edge_in::<P>(&m) {
                 Ok((o, e)) => Msg::Edge(o, e),
                 Err(r) => Msg::Rejected(r),
             },
@@ -163,9 +191,9 @@ pub fn serve_map(config: &Config, map: Option<MapFile>, stop: &AtomicBool) -> Re
 /// Tells the engine thread to stop when dropped, also when the IPC loop
 /// unwinds: the engine's re-solve waker holds a sender of its channel, so
 /// the channel never closes by itself.
-struct StopEngine(channel::Sender<Msg>);
+struct StopEngine<P: EnginePose>(channel::Sender<Msg<P>>);
 
-impl Drop for StopEngine {
+impl<P: EnginePose> Drop for StopEngine<P> {
     fn drop(&mut self) {
         let _ = self.0.send(Msg::Shutdown);
     }
@@ -173,11 +201,13 @@ impl Drop for StopEngine {
 
 /// Opens the state directory, if one is configured, and decides which map
 /// the daemon continues.
-fn open_state(config: &Config, map: Option<MapFile>) -> Result<Start, ServeError> {
+fn open_state<P: EnginePose>(config: &Config, map: Option<MapFile<P>>) -> Result<Start<P>, ServeError> {
     let Some(dir) = &config.state.dir else {
         return Ok(Start {
+            store: None,
             map,
-            ..Start::default()
+            tail: Vec::new(),
+            cut: None,
         });
     };
     let (store, recovered) = StateDir::open(dir, &config.state).map_err(ServeError::State)?;
@@ -202,14 +232,19 @@ pub struct Server {
 }
 
 impl Server {
-    /// Serves `config.namespace` on a new thread; returns once frontends can
-    /// connect (or with the start-up error).
+    /// Serves `config.namespace` on a new thread, in the configured
+    /// dimension; returns once frontends can connect (or with the start-up
+    /// error).
     pub fn spawn(config: Config) -> Result<Server, ServeError> {
-        Self::spawn_map(config, None)
+        match config.dimension {
+            3 => Self::spawn_map::<Pose3>(config, None),
+            _ => Self::spawn_map::<crate::geometry::Pose2>(config, None),
+        }
     }
 
-    /// [`Self::spawn`], continuing `map` when given.
-    pub fn spawn_map(config: Config, map: Option<MapFile>) -> Result<Server, ServeError> {
+    /// [`Self::spawn`] on poses `P` (of the configured dimension),
+    /// continuing `map` when given.
+    pub fn spawn_map<P: EnginePose>(config: Config, map: Option<MapFile<P>>) -> Result<Server, ServeError> {
         let stop = Arc::new(AtomicBool::new(false));
         let flag = stop.clone();
         let namespace = config.namespace.clone();

@@ -72,6 +72,13 @@ impl<'a> Get<'a> {
         }
         Ok(out)
     }
+    /// Fills `out` with the next `out.len()` numbers.
+    pub fn f64s_into(&mut self, out: &mut [f64]) -> Result<(), StoreError> {
+        for x in out {
+            *x = self.f64()?;
+        }
+        Ok(())
+    }
     /// A count of items at least `item_bytes` long each: refused when the
     /// rest of the input could not hold them (no allocation from a lie).
     pub fn count(&mut self, item_bytes: usize) -> Result<usize, StoreError> {

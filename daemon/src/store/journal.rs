@@ -9,7 +9,8 @@
 
 use super::bytes::{frame, unframe, Framed, Put};
 use super::record::Record;
-use super::{StoreError, SyncPolicy, FORMAT_VERSION};
+use super::{StoreError, SyncPolicy, FORMAT_VERSION, OLDEST_FORMAT};
+use slamd_types::{Pose2, RigidMotion};
 use std::fs::{File, OpenOptions};
 use std::io::{Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
@@ -47,11 +48,11 @@ pub struct Cut {
 
 /// What [`read`] found.
 #[derive(Debug)]
-pub struct Contents {
+pub struct Contents<P: RigidMotion = Pose2> {
     /// The map generation the journal follows.
     pub generation: u64,
     /// Its whole, checked records, in order.
-    pub records: Vec<Record>,
+    pub records: Vec<Record<P>>,
     /// Bytes that hold them (the head included).
     pub valid_len: u64,
     /// Set when the file went on past them: torn or corrupt from there.
@@ -68,15 +69,20 @@ pub(super) fn head(magic: &[u8; 8], generation: u64) -> Vec<u8> {
     p.0
 }
 
-fn head_crc(magic: &[u8; 8], version: u32, generation: u64) -> u32 {
+pub(super) fn head_crc(magic: &[u8; 8], version: u32, generation: u64) -> u32 {
     let crc = crc32c::crc32c(magic);
     let crc = crc32c::crc32c_append(crc, &version.to_le_bytes());
     crc32c::crc32c_append(crc, &generation.to_le_bytes())
 }
 
 /// Checks a file's head: magic, format version, checksum. Returns the
-/// generation.
-pub(super) fn check_head(path: &Path, bytes: &[u8], magic: &[u8; 8], what: &str) -> Result<u64, StoreError> {
+/// generation and the version.
+pub(super) fn check_head(
+    path: &Path,
+    bytes: &[u8],
+    magic: &[u8; 8],
+    what: &str,
+) -> Result<(u64, u32), StoreError> {
     if bytes.len() < 8 || &bytes[..8] != magic {
         return Err(StoreError::NotOurs {
             path: path.to_path_buf(),
@@ -85,7 +91,7 @@ pub(super) fn check_head(path: &Path, bytes: &[u8], magic: &[u8; 8], what: &str)
     }
     let field = |at: usize, n: usize| bytes.get(at..at + n).unwrap_or_default();
     let version = u32::from_le_bytes(field(8, 4).try_into().unwrap_or_default());
-    if bytes.len() >= 12 && version != FORMAT_VERSION {
+    if bytes.len() >= 12 && !(OLDEST_FORMAT..=FORMAT_VERSION).contains(&version) {
         return Err(StoreError::Version {
             path: path.to_path_buf(),
             found: version,
@@ -99,18 +105,20 @@ pub(super) fn check_head(path: &Path, bytes: &[u8], magic: &[u8; 8], what: &str)
             why: format!("its {what} head is damaged"),
         });
     }
-    Ok(generation)
+    Ok((generation, version))
 }
 
 /// Reads a journal: every record up to the first that is torn, fails its
-/// checksum or does not decode. `Ok(None)` when there is no file.
-pub fn read(path: &Path) -> Result<Option<Contents>, StoreError> {
+/// checksum or does not decode. `Ok(None)` when there is no file; an
+/// error when a record is of the other dimension than `P`'s (a daemon
+/// started on another dimension's directory must not cut it).
+pub fn read<P: RigidMotion>(path: &Path) -> Result<Option<Contents<P>>, StoreError> {
     let bytes = match std::fs::read(path) {
         Ok(b) => b,
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
         Err(e) => return Err(StoreError::io("read", path, e)),
     };
-    let generation = check_head(path, &bytes, MAGIC, "journal")?;
+    let (generation, _) = check_head(path, &bytes, MAGIC, "journal")?;
     let mut records = Vec::new();
     let mut at = HEAD;
     let mut cut = None;
@@ -122,6 +130,7 @@ pub fn read(path: &Path) -> Result<Option<Contents>, StoreError> {
                     at += used;
                     continue;
                 }
+                Err(e @ StoreError::Dimension { .. }) => return Err(e),
                 Err(e) => e.to_string(),
             },
             Framed::Torn => "torn (the file ends inside it)".into(),
@@ -186,7 +195,7 @@ impl Journal {
     }
 
     /// Buffers one record for the next [`Self::commit`].
-    pub fn append(&mut self, r: &Record) {
+    pub fn append<P: RigidMotion>(&mut self, r: &Record<P>) {
         let mut p = Put::default();
         r.encode(&mut p);
         frame(&mut self.pending, &p.0);

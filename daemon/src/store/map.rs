@@ -6,9 +6,11 @@
 //! frame (`len: u32 | crc32c: u32 | body`) whose body is, in
 //! order (counts are `u64`, everything little-endian):
 //!
-//! - keyframes: `id: u64, joined: u8, has_guess: u8, guess: 3 × f64,
-//!   estimate: 3 × f64, linearisation point: 3 × f64`, in arrival order
-//!   (the first is the gauge);
+//! - the dimension: `u8`, 2 or 3 (not in version 1 files, which are 2-D);
+//! - keyframes: `id: u64, joined: u8, has_guess: u8, guess, estimate,
+//!   linearisation point`, each pose as `x, y, θ` (2-D) or `x, y, z, qx,
+//!   qy, qz, qw` (3-D) in `f64`s, in arrival order (the first is the
+//!   gauge);
 //! - edges: the edge as a journal record holds it, then `scale, switch:
 //!   f64, frontend: u32, sequence: u64`;
 //! - the GPS origin: `has: u8, lat, lon, height: f64`;
@@ -22,13 +24,13 @@
 
 use super::bytes::{frame, unframe, Framed, Get, Put};
 use super::journal::{check_head, head, HEAD};
-use super::record::{get_edge, get_pose, put_edge, Record};
+use super::record::{get_edge, get_pose, put_edge, put_pose, Record};
 use super::StoreError;
 use crate::gps::Georef;
 use crate::graph::{GraphError, PoseGraph};
 use faer::c64;
 use slamd_protocol::codec::Origin;
-use slamd_types::{EdgeInput, FixInput, Geodetic, KeyframeId, Pose2};
+use slamd_types::{EdgeInput, FixInput, Geodetic, InformationMatrix, KeyframeId, Pose2, RigidMotion};
 use std::path::Path;
 
 /// The map file's first bytes.
@@ -36,26 +38,26 @@ pub const MAGIC: &[u8; 8] = b"SLAMDMAP";
 
 /// A keyframe of a saved map.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct MapKeyframe {
+pub struct MapKeyframe<P: RigidMotion = Pose2> {
     /// Its id.
     pub id: KeyframeId,
     /// The frontend's guess, if it gave one.
-    pub guess: Option<Pose2>,
+    pub guess: Option<P>,
     /// The estimate when the map was saved.
-    pub estimate: Pose2,
+    pub estimate: P,
     /// Where the engine had linearised it (the estimate is one
     /// Gauss–Newton step from there): a restored engine factorises here
     /// and publishes the same estimate.
-    pub lin: Pose2,
+    pub lin: P,
     /// Whether it was linked to the gauge.
     pub joined: bool,
 }
 
 /// An edge of a saved map.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct MapEdge {
+pub struct MapEdge<P: RigidMotion = Pose2> {
     /// The edge as received.
-    pub edge: EdgeInput,
+    pub edge: EdgeInput<P>,
     /// Its weight as set through the engine.
     pub scale: f64,
     /// The outlier filter's switch.
@@ -85,15 +87,15 @@ pub struct SavedGeoref {
     pub weight: f64,
 }
 
-/// A whole map.
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct MapFile {
+/// A whole map; `P` is its pose type.
+#[derive(Clone, Debug, PartialEq)]
+pub struct MapFile<P: RigidMotion = Pose2> {
     /// Bumped by each checkpoint; the journal names the one it follows.
     pub generation: u64,
     /// Keyframes in arrival order.
-    pub keyframes: Vec<MapKeyframe>,
+    pub keyframes: Vec<MapKeyframe<P>>,
     /// Edges in arrival order.
-    pub edges: Vec<MapEdge>,
+    pub edges: Vec<MapEdge<P>>,
     /// The ENU origin of the GPS fixes.
     pub origin: Option<Geodetic>,
     /// The georeference of the last re-solve.
@@ -103,21 +105,37 @@ pub struct MapFile {
     /// What each frontend has had acknowledged.
     pub acks: Vec<AckState>,
     /// Edges and fixes waiting for a keyframe.
-    pub held: Vec<Record>,
+    pub held: Vec<Record<P>>,
 }
 
-impl MapFile {
+impl<P: RigidMotion> Default for MapFile<P> {
+    fn default() -> Self {
+        Self {
+            generation: 0,
+            keyframes: Vec::new(),
+            edges: Vec::new(),
+            origin: None,
+            georef: None,
+            fixes: Vec::new(),
+            acks: Vec::new(),
+            held: Vec::new(),
+        }
+    }
+}
+
+impl<P: RigidMotion> MapFile<P> {
     /// The file's bytes.
     pub fn encode(&self) -> Vec<u8> {
         let mut p = Put::default();
+        p.u8(P::DIMENSION as u8);
         p.u64(self.keyframes.len() as u64);
         for k in &self.keyframes {
             p.u64(k.id);
             p.u8(u8::from(k.joined));
             p.u8(u8::from(k.guess.is_some()));
-            p.f64s(&k.guess.unwrap_or(Pose2::IDENTITY).to_array());
-            p.f64s(&k.estimate.to_array());
-            p.f64s(&k.lin.to_array());
+            put_pose(&mut p, &k.guess.unwrap_or(P::IDENTITY));
+            put_pose(&mut p, &k.estimate);
+            put_pose(&mut p, &k.lin);
         }
         p.u64(self.edges.len() as u64);
         for e in &self.edges {
@@ -169,26 +187,29 @@ impl MapFile {
     }
 
     /// Reads a map file's bytes; `path` labels errors.
-    pub fn decode(path: &Path, bytes: &[u8]) -> Result<MapFile, StoreError> {
-        let generation = check_head(path, bytes, MAGIC, "map")?;
+    pub fn decode(path: &Path, bytes: &[u8]) -> Result<MapFile<P>, StoreError> {
+        let (generation, version) = check_head(path, bytes, MAGIC, "map")?;
         let body = match unframe(&bytes[HEAD..]) {
             Framed::Whole(body, used) if HEAD + used == bytes.len() => body,
             Framed::Whole(..) => return Err(corrupt(path, "bytes after the map")),
             Framed::Torn => return Err(corrupt(path, "the file ends early")),
             Framed::Corrupt => return Err(corrupt(path, "checksum mismatch")),
         };
-        decode_body(body, generation).map_err(|e| corrupt(path, &e.to_string()))
+        decode_body(body, generation, version).map_err(|e| match e {
+            StoreError::Dimension { .. } => e,
+            e => corrupt(path, &e.to_string()),
+        })
     }
 
     /// Reads a map file.
-    pub fn read(path: &Path) -> Result<MapFile, StoreError> {
+    pub fn read(path: &Path) -> Result<MapFile<P>, StoreError> {
         let bytes = std::fs::read(path).map_err(|e| StoreError::io("read", path, e))?;
         Self::decode(path, &bytes)
     }
 
     /// The map as a pose graph: each keyframe with its saved estimate as
     /// its guess (where it had joined), every edge as received.
-    pub fn graph(&self) -> Result<PoseGraph, GraphError> {
+    pub fn graph(&self) -> Result<PoseGraph<P>, GraphError> {
         let mut g = PoseGraph::default();
         for k in &self.keyframes {
             g.add_keyframe(k.id, if k.joined { Some(k.estimate) } else { k.guess })?;
@@ -199,7 +220,9 @@ impl MapFile {
         }
         Ok(g)
     }
+}
 
+impl MapFile {
     /// Whether `bytes` start like a map file.
     pub fn sniff(bytes: &[u8]) -> bool {
         bytes.starts_with(MAGIC)
@@ -213,13 +236,21 @@ fn corrupt(path: &Path, why: &str) -> StoreError {
     }
 }
 
-fn decode_body(body: &[u8], generation: u64) -> Result<MapFile, StoreError> {
+fn decode_body<P: RigidMotion>(body: &[u8], generation: u64, version: u32) -> Result<MapFile<P>, StoreError> {
     let mut g = Get::new(body);
+    let dimension = if version == 1 { 2 } else { u32::from(g.u8()?) };
+    if dimension != P::DIMENSION {
+        return Err(StoreError::Dimension {
+            found: dimension,
+            serving: P::DIMENSION,
+        });
+    }
     let mut map = MapFile {
         generation,
         ..MapFile::default()
     };
-    for _ in 0..g.count(82)? {
+    let pose_bytes = 8 * P::PARAMS;
+    for _ in 0..g.count(10 + 3 * pose_bytes)? {
         let id = g.u64()?;
         let joined = g.u8()? != 0;
         let has_guess = g.u8()? != 0;
@@ -234,7 +265,7 @@ fn decode_body(body: &[u8], generation: u64) -> Result<MapFile, StoreError> {
             joined,
         });
     }
-    for _ in 0..g.count(101)? {
+    for _ in 0..g.count(17 + pose_bytes + 8 * P::Information::UPPER + 28)? {
         let edge = get_edge(&mut g)?;
         let scale = g.f64()?;
         let switch = g.f64()?;

@@ -27,14 +27,21 @@ pub use map::{AckState, MapEdge, MapFile, MapKeyframe, SavedGeoref};
 pub use record::Record;
 
 use serde::{Deserialize, Serialize};
+use slamd_types::{Pose2, RigidMotion};
 use std::fmt;
 use std::fs::File;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-/// The version of the journal and map formats; any other is refused.
-pub const FORMAT_VERSION: u32 = 1;
+/// The version of the journal and map formats this slamd writes. It reads
+/// [`OLDEST_FORMAT`] up to this one and refuses any other. Version 2 added
+/// 3-D maps: its map body starts with the dimension (version 1 maps are
+/// 2-D), and 3-D journal records have tags of their own.
+pub const FORMAT_VERSION: u32 = 2;
+
+/// The oldest format version this slamd reads.
+pub const OLDEST_FORMAT: u32 = 1;
 
 /// When the journal is fsynced.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
@@ -90,6 +97,13 @@ pub enum StoreError {
     Malformed(String),
     /// Another daemon holds the directory.
     Locked(PathBuf),
+    /// The directory holds a map of the other dimension.
+    Dimension {
+        /// The map's dimension.
+        found: u32,
+        /// The daemon's.
+        serving: u32,
+    },
     /// The journal names a map generation the map file does not have.
     Mismatch {
         /// The journal's generation.
@@ -116,11 +130,16 @@ impl fmt::Display for StoreError {
             StoreError::NotOurs { path, what } => write!(f, "{} is not a slamd {what} file", path.display()),
             StoreError::Version { path, found } => write!(
                 f,
-                "{} is of format version {found}; this slamd reads version {FORMAT_VERSION}",
+                "{} is of format version {found}; this slamd reads versions {OLDEST_FORMAT} to {FORMAT_VERSION}",
                 path.display()
             ),
             StoreError::Corrupt { path, why } => write!(f, "{} is corrupt: {why}", path.display()),
             StoreError::Malformed(why) => write!(f, "malformed: {why}"),
+            StoreError::Dimension { found, serving } => write!(
+                f,
+                "a {found}-D map where a {serving}-D one is expected (a daemon's `dimension` setting): \
+                 give each dimension its own state directory"
+            ),
             StoreError::Locked(dir) => write!(f, "another slamd uses the state directory {}", dir.display()),
             StoreError::Mismatch { journal, map } => write!(
                 f,
@@ -150,12 +169,12 @@ pub(crate) fn write_atomically(tmp: &Path, path: &Path, bytes: &[u8]) -> Result<
 }
 
 /// What a state directory held when it was opened.
-#[derive(Debug, Default)]
-pub struct Recovered {
+#[derive(Debug)]
+pub struct Recovered<P: RigidMotion = Pose2> {
     /// The last checkpoint.
-    pub map: Option<MapFile>,
+    pub map: Option<MapFile<P>>,
     /// The journal's records after it.
-    pub tail: Vec<Record>,
+    pub tail: Vec<Record<P>>,
     /// Where the journal was cut, if it was.
     pub cut: Option<Cut>,
 }
@@ -200,7 +219,13 @@ impl StateDir {
     /// Opens (creating) the directory, takes its lock, reads the map and
     /// the journal, cuts a torn journal tail and opens the journal for
     /// appending. A directory that cannot be written is an error here.
-    pub fn open(dir: &Path, config: &StateConfig) -> Result<(StateDir, Recovered), StoreError> {
+    ///
+    /// `P` is the daemon's pose type: a directory that holds a map of the
+    /// other dimension is refused ([`StoreError::Dimension`]).
+    pub fn open<P: RigidMotion>(
+        dir: &Path,
+        config: &StateConfig,
+    ) -> Result<(StateDir, Recovered<P>), StoreError> {
         std::fs::create_dir_all(dir).map_err(|e| StoreError::io("create", dir, e))?;
         let lock = lock(dir)?;
         let map_path = dir.join("map");
@@ -213,7 +238,8 @@ impl StateDir {
         let interval = Duration::from_millis(config.sync_interval_ms);
         let mut recovered = Recovered {
             map,
-            ..Recovered::default()
+            tail: Vec::new(),
+            cut: None,
         };
         // after a crash inside a checkpoint the journal that follows the
         // map may still be called journal.next
@@ -270,7 +296,7 @@ impl StateDir {
     /// journal that the next start drops (its records are in the map) and
     /// `journal.next`, which it takes. On an error before the map's
     /// rename nothing changed.
-    pub fn checkpoint(&mut self, mut map: MapFile) -> Result<(), StoreError> {
+    pub fn checkpoint<P: RigidMotion>(&mut self, mut map: MapFile<P>) -> Result<(), StoreError> {
         let generation = self.journal.generation() + 1;
         map.generation = generation;
         let interval = Duration::from_millis(self.config.sync_interval_ms);

@@ -3,25 +3,32 @@
 //! Payload layout (little-endian; see docs/daemon.md, "State directory"):
 //! `tag: u8 | frontend: u32 | sequence: u64 | body`, with the body
 //!
-//! | tag | record   | body |
-//! |-----|----------|------|
-//! | 1   | keyframe | `id: u64, has_guess: u8, x, y, θ: f64` |
-//! | 2   | edge     | `from, to: u64, kind: u8, x, y, θ: f64, Ω upper: 6 × f64` |
-//! | 3   | fix      | `keyframe: u64, lat, lon, height: f64, covariance: 4 × f64` |
-//! | 4   | refused  | none: refused on arrival, it only counts for the acknowledgement |
+//! | tag | record      | body |
+//! |-----|-------------|------|
+//! | 1   | keyframe    | `id: u64, has_guess: u8, x, y, θ: f64` |
+//! | 2   | edge        | `from, to: u64, kind: u8, x, y, θ: f64, Ω upper: 6 × f64` |
+//! | 3   | fix         | `keyframe: u64, lat, lon, height: f64, covariance: 4 × f64` |
+//! | 4   | refused     | none: refused on arrival, it only counts for the acknowledgement |
+//! | 5   | keyframe 3-D | `id: u64, has_guess: u8, x, y, z, qx, qy, qz, qw: f64` |
+//! | 6   | edge 3-D    | `from, to: u64, kind: u8, x, y, z, qx, qy, qz, qw: f64, Ω upper: 21 × f64` |
+//!
+//! A record of the other dimension than the reader's is an error
+//! ([`StoreError::Dimension`]), never a torn tail to cut off.
 
 use super::bytes::{Get, Put};
 use super::StoreError;
 use slamd_protocol::codec::Origin;
-use slamd_types::{EdgeInput, EdgeKind, FixInput, Geodetic, Information, KeyframeId, Pose2};
+use slamd_types::{
+    EdgeInput, EdgeKind, FixInput, Geodetic, InformationMatrix, KeyframeId, Pose2, RigidMotion,
+};
 
-/// One message the daemon took in.
+/// One message the daemon took in; `P` is the pose type of the map.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub enum Record {
+pub enum Record<P: RigidMotion = Pose2> {
     /// A keyframe and its guess.
-    Keyframe(Origin, KeyframeId, Option<Pose2>),
+    Keyframe(Origin, KeyframeId, Option<P>),
     /// An edge.
-    Edge(Origin, EdgeInput),
+    Edge(Origin, EdgeInput<P>),
     /// A GPS fix.
     Fix(Origin, FixInput),
     /// A message refused on arrival.
@@ -32,8 +39,19 @@ const KEYFRAME: u8 = 1;
 const EDGE: u8 = 2;
 const FIX: u8 = 3;
 const REFUSED: u8 = 4;
+const KEYFRAME3: u8 = 5;
+const EDGE3: u8 = 6;
 
-impl Record {
+/// The tags of a keyframe and an edge in `dimension`.
+fn tags(dimension: u32) -> (u8, u8) {
+    if dimension == 3 {
+        (KEYFRAME3, EDGE3)
+    } else {
+        (KEYFRAME, EDGE)
+    }
+}
+
+impl<P: RigidMotion> Record<P> {
     /// Who sent it.
     pub fn origin(&self) -> Origin {
         match *self {
@@ -43,9 +61,10 @@ impl Record {
 
     /// Appends the payload.
     pub fn encode(&self, p: &mut Put) {
+        let (keyframe, edge) = tags(P::DIMENSION);
         let (tag, o) = match self {
-            Record::Keyframe(o, ..) => (KEYFRAME, o),
-            Record::Edge(o, _) => (EDGE, o),
+            Record::Keyframe(o, ..) => (keyframe, o),
+            Record::Edge(o, _) => (edge, o),
             Record::Fix(o, _) => (FIX, o),
             Record::Refused(o) => (REFUSED, o),
         };
@@ -56,7 +75,7 @@ impl Record {
             Record::Keyframe(_, id, guess) => {
                 p.u64(*id);
                 p.u8(u8::from(guess.is_some()));
-                p.f64s(&guess.unwrap_or(Pose2::IDENTITY).to_array());
+                put_pose(p, &guess.unwrap_or(P::IDENTITY));
             }
             Record::Edge(_, e) => put_edge(p, e),
             Record::Fix(_, f) => {
@@ -69,21 +88,28 @@ impl Record {
     }
 
     /// Reads a payload; every field is checked as on the wire.
-    pub fn decode(bytes: &[u8]) -> Result<Record, StoreError> {
+    pub fn decode(bytes: &[u8]) -> Result<Record<P>, StoreError> {
         let mut g = Get::new(bytes);
         let tag = g.u8()?;
         let o = Origin {
             frontend: g.u32()?,
             sequence: g.u64()?,
         };
+        let (keyframe, edge) = tags(P::DIMENSION);
         let r = match tag {
-            KEYFRAME => {
+            KEYFRAME | EDGE | KEYFRAME3 | EDGE3 if tag != keyframe && tag != edge => {
+                return Err(StoreError::Dimension {
+                    found: 5 - P::DIMENSION,
+                    serving: P::DIMENSION,
+                })
+            }
+            t if t == keyframe => {
                 let id = g.u64()?;
                 let has = g.u8()?;
                 let pose = get_pose(&mut g)?;
                 Record::Keyframe(o, id, (has != 0).then_some(pose))
             }
-            EDGE => Record::Edge(o, get_edge(&mut g)?),
+            t if t == edge => Record::Edge(o, get_edge(&mut g)?),
             FIX => {
                 let keyframe = g.u64()?;
                 let [lat, lon, height] = g.f64s()?;
@@ -112,8 +138,15 @@ impl Record {
     }
 }
 
+/// A pose's [`RigidMotion::PARAMS`] numbers.
+pub(super) fn put_pose<P: RigidMotion>(p: &mut Put, pose: &P) {
+    let mut v = [0.0; 7];
+    pose.write_params(&mut v);
+    p.f64s(&v[..P::PARAMS]);
+}
+
 /// `from, to, kind, measurement, Ω upper`.
-pub(super) fn put_edge(p: &mut Put, e: &EdgeInput) {
+pub(super) fn put_edge<P: RigidMotion>(p: &mut Put, e: &EdgeInput<P>) {
     p.u64(e.from);
     p.u64(e.to);
     p.u8(match e.kind {
@@ -122,11 +155,13 @@ pub(super) fn put_edge(p: &mut Put, e: &EdgeInput) {
         EdgeKind::Other => 2,
         EdgeKind::TrustedLoopClosure => 3,
     });
-    p.f64s(&e.measurement.to_array());
-    p.f64s(&e.information.upper());
+    put_pose(p, &e.measurement);
+    let mut upper = [0.0; 21];
+    e.information.write_upper(&mut upper);
+    p.f64s(&upper[..P::Information::UPPER]);
 }
 
-pub(super) fn get_edge(g: &mut Get<'_>) -> Result<EdgeInput, StoreError> {
+pub(super) fn get_edge<P: RigidMotion>(g: &mut Get<'_>) -> Result<EdgeInput<P>, StoreError> {
     let from = g.u64()?;
     let to = g.u64()?;
     let kind = match g.u8()? {
@@ -141,26 +176,29 @@ pub(super) fn get_edge(g: &mut Get<'_>) -> Result<EdgeInput, StoreError> {
         }
     };
     let measurement = get_pose(g)?;
-    let information = Information::from_upper(g.f64s()?)
+    let mut upper = [0.0; 21];
+    g.f64s_into(&mut upper[..P::Information::UPPER])?;
+    let information = P::Information::from_upper_slice(&upper)
         .map_err(|e| StoreError::Malformed(format!("edge {from}→{to}: {e}")))?;
     Ok(EdgeInput::new(from, to, measurement, information, kind))
 }
 
-pub(super) fn get_pose(g: &mut Get<'_>) -> Result<Pose2, StoreError> {
-    let [x, y, theta] = g.f64s()?;
-    let p = Pose2::new(x, y, theta);
-    if p.is_finite() {
-        Ok(p)
-    } else {
-        Err(StoreError::Malformed(format!(
-            "pose ({x}, {y}, {theta}) is not finite"
-        )))
-    }
+pub(super) fn get_pose<P: RigidMotion>(g: &mut Get<'_>) -> Result<P, StoreError> {
+    let mut v = [0.0; 7];
+    g.f64s_into(&mut v[..P::PARAMS])?;
+    P::from_params(&v).ok_or_else(|| {
+        StoreError::Malformed(format!(
+            "pose {:?} is not finite or not of unit norm",
+            &v[..P::PARAMS]
+        ))
+    })
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    use slamd_types::{Information, Information6, Pose3};
 
     pub(crate) fn samples() -> Vec<Record> {
         let o = |s| Origin {
@@ -198,9 +236,9 @@ mod tests {
             r.encode(&mut p);
             assert_eq!(Record::decode(&p.0).unwrap(), r);
             // one byte short or one too many is refused
-            assert!(Record::decode(&p.0[..p.0.len() - 1]).is_err());
+            assert!(Record::<Pose2>::decode(&p.0[..p.0.len() - 1]).is_err());
             p.u8(0);
-            assert!(Record::decode(&p.0).is_err());
+            assert!(Record::<Pose2>::decode(&p.0).is_err());
         }
     }
 
@@ -212,9 +250,56 @@ mod tests {
         let x = 1 + 4 + 8 + 8 + 8 + 1;
         let mut bad = p.0.clone();
         bad[x..x + 8].copy_from_slice(&f64::NAN.to_le_bytes());
-        assert!(matches!(Record::decode(&bad), Err(StoreError::Malformed(m)) if m.contains("not finite")));
+        assert!(
+            matches!(Record::<Pose2>::decode(&bad), Err(StoreError::Malformed(m)) if m.contains("not finite"))
+        );
         let mut bad = p.0.clone();
         bad[x + 24..x + 32].copy_from_slice(&(-1.0f64).to_le_bytes());
-        assert!(Record::decode(&bad).is_err());
+        assert!(Record::<Pose2>::decode(&bad).is_err());
+    }
+
+    #[test]
+    fn spatial_records_read_back_and_the_other_dimension_is_refused() {
+        let o = Origin {
+            frontend: 3,
+            sequence: 1,
+        };
+        let z = Pose3::from_xyz_rpy([1.0, 2.0, -0.5, 0.1, 0.2, -0.3]);
+        let info = Information6::identity().scaled(2.0);
+        for r in [
+            Record::Keyframe(o, 4, Some(z)),
+            Record::Keyframe(o, 5, None),
+            Record::Edge(o, EdgeInput::new(4, 5, z, info, EdgeKind::LoopClosure)),
+        ] {
+            let mut p = Put::default();
+            r.encode(&mut p);
+            let back = Record::<Pose3>::decode(&p.0).unwrap();
+            match (r, back) {
+                (Record::Edge(_, a), Record::Edge(_, b)) => {
+                    assert_eq!(
+                        (a.from, a.to, a.kind, a.information),
+                        (b.from, b.to, b.kind, b.information)
+                    );
+                    assert!((a.measurement.translation - b.measurement.translation).norm() < 1e-15);
+                    assert!(a.measurement.rotation.angle_to(&b.measurement.rotation) < 1e-12);
+                }
+                (Record::Keyframe(_, a, ga), Record::Keyframe(_, b, gb)) => {
+                    assert_eq!((a, ga.map(|g| g.translation)), (b, gb.map(|g| g.translation)));
+                }
+                _ => panic!("{back:?} is not {r:?}"),
+            }
+            let err = Record::<Pose2>::decode(&p.0).unwrap_err();
+            assert!(
+                matches!(err, StoreError::Dimension { found: 3, serving: 2 }),
+                "{err}"
+            );
+        }
+        let mut p = Put::default();
+        samples()[2].encode(&mut p);
+        let err = Record::<Pose3>::decode(&p.0).unwrap_err();
+        assert!(
+            matches!(err, StoreError::Dimension { found: 2, serving: 3 }),
+            "{err}"
+        );
     }
 }

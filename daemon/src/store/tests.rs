@@ -2,7 +2,7 @@ use super::*;
 use crate::gps::Georef;
 use faer::c64;
 use slamd_protocol::codec::Origin;
-use slamd_types::{EdgeInput, EdgeKind, FixInput, Geodetic, Information, Pose2};
+use slamd_types::{EdgeInput, EdgeKind, FixInput, Geodetic, Information, Information6, Pose2, Pose3};
 
 fn origin(s: u64) -> Origin {
     Origin {
@@ -35,7 +35,7 @@ fn temp_dir(name: &str) -> PathBuf {
 }
 
 fn write_journal(dir: &Path, records: &[Record]) {
-    let (mut state, _) = StateDir::open(dir, &StateConfig::default()).unwrap();
+    let (mut state, _) = StateDir::open::<Pose2>(dir, &StateConfig::default()).unwrap();
     for r in records {
         state.journal().append(r);
     }
@@ -47,7 +47,7 @@ fn the_journal_reads_back_what_was_committed() {
     let dir = temp_dir("roundtrip");
     let records = stream(20);
     write_journal(&dir, &records);
-    let (_, rec) = StateDir::open(&dir, &StateConfig::default()).unwrap();
+    let (_, rec) = StateDir::open::<Pose2>(&dir, &StateConfig::default()).unwrap();
     assert_eq!(rec.tail, records);
     assert!(rec.cut.is_none() && rec.map.is_none());
 }
@@ -68,7 +68,7 @@ fn a_torn_last_record_is_cut_at_every_offset_and_only_it_is_lost() {
     assert!(last_start < whole.len());
     for cut in last_start..whole.len() {
         std::fs::write(&path, &whole[..cut]).unwrap();
-        let (mut state, rec) = StateDir::open(&dir, &StateConfig::default()).unwrap();
+        let (mut state, rec) = StateDir::open::<Pose2>(&dir, &StateConfig::default()).unwrap();
         assert_eq!(rec.tail, records[..records.len() - 1], "cut at {cut}");
         if cut > last_start {
             assert_eq!(
@@ -84,7 +84,7 @@ fn a_torn_last_record_is_cut_at_every_offset_and_only_it_is_lost() {
         state.journal().append(&extra);
         state.journal().commit().unwrap();
         drop(state);
-        let (_, again) = StateDir::open(&dir, &StateConfig::default()).unwrap();
+        let (_, again) = StateDir::open::<Pose2>(&dir, &StateConfig::default()).unwrap();
         let mut expected = records[..records.len() - 1].to_vec();
         expected.push(extra);
         assert_eq!(again.tail, expected, "cut at {cut}");
@@ -102,7 +102,7 @@ fn a_corrupt_record_ends_the_journal_there() {
     let n = bytes.len();
     bytes[n - 3] ^= 0x40;
     std::fs::write(&path, &bytes).unwrap();
-    let (_, rec) = StateDir::open(&dir, &StateConfig::default()).unwrap();
+    let (_, rec) = StateDir::open::<Pose2>(&dir, &StateConfig::default()).unwrap();
     assert_eq!(rec.tail, records[..records.len() - 1]);
     assert!(rec.cut.unwrap().reason.contains("checksum"));
 }
@@ -115,16 +115,26 @@ fn another_format_version_is_refused_not_misread() {
     let mut bytes = std::fs::read(&path).unwrap();
     bytes[8..12].copy_from_slice(&(FORMAT_VERSION + 1).to_le_bytes());
     std::fs::write(&path, &bytes).unwrap();
-    let err = StateDir::open(&dir, &StateConfig::default()).err().unwrap();
+    let err = StateDir::open::<Pose2>(&dir, &StateConfig::default())
+        .err()
+        .unwrap();
     assert!(matches!(err, StoreError::Version { found, .. } if found == FORMAT_VERSION + 1));
-    assert!(err.to_string().contains("format version 2"), "{err}");
+    assert!(
+        err.to_string()
+            .contains(&format!("format version {}", FORMAT_VERSION + 1)),
+        "{err}"
+    );
     bytes[8..12].copy_from_slice(&FORMAT_VERSION.to_le_bytes());
     bytes[20] ^= 1;
     std::fs::write(&path, &bytes).unwrap();
-    let err = StateDir::open(&dir, &StateConfig::default()).err().unwrap();
+    let err = StateDir::open::<Pose2>(&dir, &StateConfig::default())
+        .err()
+        .unwrap();
     assert!(err.to_string().contains("head is damaged"), "{err}");
     std::fs::write(&path, b"VERTEX_SE2 0 0 0 0\n").unwrap();
-    let err = StateDir::open(&dir, &StateConfig::default()).err().unwrap();
+    let err = StateDir::open::<Pose2>(&dir, &StateConfig::default())
+        .err()
+        .unwrap();
     assert!(err.to_string().contains("not a slamd journal"), "{err}");
 }
 
@@ -192,11 +202,14 @@ fn a_map_reads_back_and_a_damaged_one_is_refused() {
     let path = Path::new("sample.map");
     assert_eq!(MapFile::decode(path, &bytes).unwrap(), map);
     for cut in [0, 10, 24, 30, bytes.len() - 1] {
-        assert!(MapFile::decode(path, &bytes[..cut]).is_err(), "cut at {cut}");
+        assert!(
+            MapFile::<Pose2>::decode(path, &bytes[..cut]).is_err(),
+            "cut at {cut}"
+        );
     }
     let mut bad = bytes.clone();
     bad[40] ^= 1;
-    let err = MapFile::decode(path, &bad).unwrap_err();
+    let err = MapFile::<Pose2>::decode(path, &bad).unwrap_err();
     assert!(err.to_string().contains("checksum"), "{err}");
 }
 
@@ -207,14 +220,14 @@ fn a_checkpoint_replaces_the_journal_and_a_stale_journal_is_dropped() {
     write_journal(&dir, &records);
     let old_journal = std::fs::read(dir.join("journal")).unwrap();
     {
-        let (mut state, rec) = StateDir::open(&dir, &StateConfig::default()).unwrap();
+        let (mut state, rec) = StateDir::open::<Pose2>(&dir, &StateConfig::default()).unwrap();
         assert_eq!(rec.tail.len(), records.len());
         state.checkpoint(sample_map()).unwrap();
-        let after = Record::Refused(origin(50));
+        let after = Record::<Pose2>::Refused(origin(50));
         state.journal().append(&after);
         state.journal().commit().unwrap();
     }
-    let (_, rec) = StateDir::open(&dir, &StateConfig::default()).unwrap();
+    let (_, rec) = StateDir::open::<Pose2>(&dir, &StateConfig::default()).unwrap();
     let map = rec.map.unwrap();
     assert_eq!(map.generation, 1);
     assert_eq!(map.keyframes, sample_map().keyframes);
@@ -222,11 +235,13 @@ fn a_checkpoint_replaces_the_journal_and_a_stale_journal_is_dropped() {
     // a crash between the map's rename and the new journal's: the old
     // journal, already in the map, is not replayed
     std::fs::write(dir.join("journal"), &old_journal).unwrap();
-    let (_, rec) = StateDir::open(&dir, &StateConfig::default()).unwrap();
+    let (_, rec) = StateDir::open::<Pose2>(&dir, &StateConfig::default()).unwrap();
     assert!(rec.tail.is_empty() && rec.map.is_some());
     // a journal newer than its map: the map was lost
     std::fs::remove_file(dir.join("map")).unwrap();
-    let err = StateDir::open(&dir, &StateConfig::default()).err().unwrap();
+    let err = StateDir::open::<Pose2>(&dir, &StateConfig::default())
+        .err()
+        .unwrap();
     assert!(
         matches!(err, StoreError::Mismatch { journal: 1, map: 0 }),
         "{err}"
@@ -236,15 +251,86 @@ fn a_checkpoint_replaces_the_journal_and_a_stale_journal_is_dropped() {
 #[test]
 fn a_second_daemon_cannot_take_the_directory() {
     let dir = temp_dir("lock");
-    let (_first, _) = StateDir::open(&dir, &StateConfig::default()).unwrap();
-    let err = StateDir::open(&dir, &StateConfig::default()).err().unwrap();
+    let (_first, _) = StateDir::open::<Pose2>(&dir, &StateConfig::default()).unwrap();
+    let err = StateDir::open::<Pose2>(&dir, &StateConfig::default())
+        .err()
+        .unwrap();
     assert!(matches!(err, StoreError::Locked(_)), "{err}");
 }
 
 #[test]
 fn a_directory_that_cannot_be_written_is_refused_at_start() {
-    let err = StateDir::open(Path::new("/proc/slamd-state"), &StateConfig::default())
+    let err = StateDir::open::<Pose2>(Path::new("/proc/slamd-state"), &StateConfig::default())
         .err()
         .unwrap();
     assert!(err.to_string().contains("cannot create"), "{err}");
+}
+
+#[test]
+fn a_version_1_map_reads_as_2d() {
+    // version 1 had no dimension byte: the same body without it
+    let map = sample_map();
+    let bytes = map.encode();
+    let body = &bytes[journal::HEAD + 8 + 1..];
+    let mut old = Vec::new();
+    old.extend_from_slice(map::MAGIC);
+    old.extend_from_slice(&1u32.to_le_bytes());
+    old.extend_from_slice(&journal::head_crc(map::MAGIC, 1, map.generation).to_le_bytes());
+    old.extend_from_slice(&map.generation.to_le_bytes());
+    bytes::frame(&mut old, body);
+    let path = Path::new("old.map");
+    assert_eq!(MapFile::<Pose2>::decode(path, &old).unwrap(), map);
+    let err = MapFile::<Pose3>::decode(path, &old).unwrap_err();
+    assert!(
+        matches!(err, StoreError::Dimension { found: 2, serving: 3 }),
+        "{err}"
+    );
+}
+
+#[test]
+fn a_3d_map_reads_back_and_a_2d_reader_refuses_it() {
+    let z = Pose3::from_xyz_rpy([1.0, 2.0, 3.0, 0.1, 0.2, 0.3]);
+    let map = MapFile::<Pose3> {
+        keyframes: vec![
+            MapKeyframe {
+                id: 1,
+                guess: None,
+                estimate: Pose3::IDENTITY,
+                lin: Pose3::IDENTITY,
+                joined: true,
+            },
+            MapKeyframe {
+                id: 2,
+                guess: Some(z),
+                estimate: z,
+                lin: z,
+                joined: true,
+            },
+        ],
+        edges: vec![MapEdge {
+            edge: EdgeInput::new(1, 2, z, Information6::identity(), EdgeKind::Odometry),
+            scale: 1.0,
+            switch: 1.0,
+            origin: origin(2),
+        }],
+        held: vec![Record::Keyframe(origin(3), 7, Some(z))],
+        ..MapFile::default()
+    };
+    let bytes = map.encode();
+    let path = Path::new("spatial.map");
+    let back = MapFile::<Pose3>::decode(path, &bytes).unwrap();
+    assert_eq!(back.keyframes.len(), 2);
+    assert!((back.keyframes[1].estimate.translation - z.translation).norm() < 1e-15);
+    assert!(back.keyframes[1].lin.rotation.angle_to(&z.rotation) < 1e-12);
+    assert_eq!(back.edges[0].edge.information, Information6::identity());
+    assert_eq!(back.held.len(), 1);
+    let err = MapFile::<Pose2>::decode(path, &bytes).unwrap_err();
+    assert!(
+        matches!(err, StoreError::Dimension { found: 3, serving: 2 }),
+        "{err}"
+    );
+    assert!(
+        err.to_string().contains("a 3-D map where a 2-D one is expected"),
+        "{err}"
+    );
 }

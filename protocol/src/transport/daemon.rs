@@ -37,6 +37,9 @@ pub enum Exit {
 }
 
 /// What woke the daemon, as handed to [`Ingress::run`]'s callback.
+// A wake lives on the stack for one call; boxing the message (an edge's
+// 264 bytes) would allocate once per message received.
+#[allow(clippy::large_enum_variant)]
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Wake {
     /// One input message.

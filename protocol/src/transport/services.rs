@@ -534,12 +534,12 @@ mod tests {
         let keyframe = Keyframe {
             id: 1,
             timestamp_ns: 0,
-            guess: [0.0; 3],
+            guess: [0.0; 7],
             has_guess: 0,
             frontend: 0,
             sequence: 0,
             protocol: PROTOCOL_VERSION,
-            reserved: 0,
+            dimension: 2,
         };
         assert_eq!(link.send_keyframe(keyframe), Ok(()));
         assert_eq!(

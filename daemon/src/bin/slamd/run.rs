@@ -2,6 +2,9 @@
 
 use clap::Args;
 use slamd::config::Config;
+use slamd::geometry::Pose2;
+use slamd::graph::Pose3;
+use slamd::store::MapFile;
 use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
 
@@ -39,7 +42,14 @@ pub fn run(opts: RunOpts) -> anyhow::Result<()> {
         config.state.dir = Some(dir);
     }
     crate::telemetry::init(&config.log);
-    let map = opts.map.as_deref().map(slamd::store::MapFile::read).transpose()?;
-    slamd::ipc::serve_map(&config, map, &AtomicBool::new(false))?;
+    let stop = AtomicBool::new(false);
+    let path = opts.map.as_deref();
+    if config.dimension == 3 {
+        let map = path.map(MapFile::<Pose3>::read).transpose()?;
+        slamd::ipc::serve_map(&config, map, &stop)?;
+    } else {
+        let map = path.map(MapFile::<Pose2>::read).transpose()?;
+        slamd::ipc::serve_map(&config, map, &stop)?;
+    }
     Ok(())
 }

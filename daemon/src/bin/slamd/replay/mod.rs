@@ -261,6 +261,7 @@ pub fn run(opts: ReplayOpts) -> anyhow::Result<()> {
             &config,
             Duration::from_secs_f64(opts.timeout),
             opts.rate,
+            2,
         )?)
     };
     let gps = crate::gps::load(&opts.gps, &graph)?;

@@ -8,6 +8,7 @@ use slamd::engine::{Engine, EnginePose, EngineStats, FixInput};
 use slamd::geometry::Pose2;
 use slamd::graph::{KeyframeId, Pose3};
 use slamd::ipc::{Frontend, Snapshots};
+use slamd_protocol::Pose;
 use std::collections::{HashMap, VecDeque};
 use std::time::{Duration, Instant};
 
@@ -40,12 +41,15 @@ pub trait Sink<P: slamd::graph::RigidMotion = Pose2> {
 /// The engine in this process.
 pub struct EmbeddedSink<P: EnginePose = Pose2>(pub Engine<P>);
 
-/// What an embedded replay does per dimension: GPS is planar.
+/// What a replay does per dimension: GPS is planar; a snapshot's poses
+/// read as the dimension's poses.
 pub trait ReplayPose: EnginePose {
     /// Hands the engine `fixes`.
     fn add_fixes(engine: &mut Engine<Self>, fixes: &[FixInput]) -> anyhow::Result<()>;
     /// The georeferenced (east, north) of every keyframe, once georeferenced.
     fn enu(engine: &Engine<Self>) -> HashMap<KeyframeId, c64>;
+    /// A snapshot's pose, `None` if it does not make one.
+    fn from_wire(p: &Pose) -> Option<Self>;
 }
 
 impl ReplayPose for Pose2 {
@@ -59,6 +63,9 @@ impl ReplayPose for Pose2 {
         let snap = engine.snapshot();
         snap.enu_poses().map(|(id, p)| (id, p.position())).collect()
     }
+    fn from_wire(p: &Pose) -> Option<Self> {
+        Some(p.pose2())
+    }
 }
 
 impl ReplayPose for Pose3 {
@@ -70,6 +77,9 @@ impl ReplayPose for Pose3 {
     }
     fn enu(_: &Engine<Pose3>) -> HashMap<KeyframeId, c64> {
         HashMap::new()
+    }
+    fn from_wire(p: &Pose) -> Option<Self> {
+        p.pose3()
     }
 }
 
@@ -132,11 +142,14 @@ pub struct DaemonSink {
 }
 
 impl DaemonSink {
+    /// Connects to the daemon serving `namespace`, which must serve graphs
+    /// of `dimension`.
     pub fn connect(
         namespace: &str,
         config: &Config,
         timeout: Duration,
         rate: Option<f64>,
+        dimension: u32,
     ) -> anyhow::Result<Self> {
         let endpoint = slamd::ipc::Endpoint {
             namespace: namespace.to_string(),
@@ -144,6 +157,14 @@ impl DaemonSink {
         };
         let frontend = Frontend::connect(endpoint)?;
         let snapshots = Snapshots::open(namespace)?;
+        if let Some(d) = served_dimension(&snapshots)? {
+            if d != dimension {
+                anyhow::bail!(
+                    "the daemon serving `{namespace}` serves {d}-D graphs and this graph is {dimension}-D; \
+                     start one with SLAMD_DIMENSION={dimension} (or `dimension = {dimension}` in its configuration)"
+                );
+            }
+        }
         Ok(Self {
             frontend,
             snapshots,
@@ -193,8 +214,23 @@ impl DaemonSink {
     }
 }
 
-impl Sink for DaemonSink {
-    fn keyframe(&mut self, k: usize, step: &Step) -> anyhow::Result<Vec<(usize, f64)>> {
+/// The dimension the daemon behind `snapshots` serves, from its status
+/// (waited for briefly; `None` if none came).
+fn served_dimension(snapshots: &Snapshots) -> anyhow::Result<Option<u32>> {
+    let deadline = Instant::now() + Duration::from_millis(500);
+    loop {
+        if let Some(status) = snapshots.status()? {
+            return Ok(Some(status.snapshot.dimension));
+        }
+        if Instant::now() > deadline {
+            return Ok(None);
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    }
+}
+
+impl<P: ReplayPose> Sink<P> for DaemonSink {
+    fn keyframe(&mut self, k: usize, step: &Step<P>) -> anyhow::Result<Vec<(usize, f64)>> {
         let mut done = Vec::new();
         if let Some((start, period)) = self.pace {
             // paced: take in snapshots until this keyframe's slot
@@ -204,9 +240,9 @@ impl Sink for DaemonSink {
             }
         }
         let arrival = Instant::now();
-        let mut last = self.frontend.add_keyframe(step.id, 0, None)?;
+        let mut last = self.frontend.publish_keyframe::<P>(step.id, 0, None)?;
         for e in &step.edges {
-            last = self.frontend.add_edge(e)?;
+            last = self.frontend.publish_edge(e)?;
         }
         for f in &step.fixes {
             last = self.frontend.add_gps(f)?;
@@ -216,7 +252,7 @@ impl Sink for DaemonSink {
             self.pending.push_back((k, last, arrival));
         }
         if self.pace.is_none() {
-            done.extend(self.drain()?);
+            done.extend(Sink::<P>::drain(self)?);
         }
         Ok(done)
     }
@@ -234,16 +270,19 @@ impl Sink for DaemonSink {
         Ok(done)
     }
 
-    fn poses(&mut self) -> anyhow::Result<HashMap<KeyframeId, Pose2>> {
+    fn poses(&mut self) -> anyhow::Result<HashMap<KeyframeId, P>> {
         let s = self.latest.as_ref().ok_or_else(|| self.no_answer())?;
-        Ok(s.poses()
-            .iter()
-            .map(|p| (p.id, Pose2::new(p.x, p.y, p.theta)))
-            .collect())
+        (s.poses().iter())
+            .map(|p| {
+                let pose =
+                    P::from_wire(p).ok_or_else(|| anyhow::anyhow!("keyframe {}: {p:?} is not a pose", p.id));
+                Ok((p.id, pose?))
+            })
+            .collect()
     }
 
-    fn finish(&mut self) -> anyhow::Result<(HashMap<KeyframeId, Pose2>, usize, Instant)> {
-        self.drain()?;
+    fn finish(&mut self) -> anyhow::Result<(HashMap<KeyframeId, P>, usize, Instant)> {
+        Sink::<P>::drain(self)?;
         // the daemon re-solves once input pauses, and again if edges came
         // in during that re-solve: take snapshots until it is quiet (the
         // first re-solved one may predate the last edges' polish)

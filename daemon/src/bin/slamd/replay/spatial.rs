@@ -1,13 +1,15 @@
-//! `slamd replay FILE` on a 3-D graph: the engine in this process, the
-//! same stream, latency and prefix checks as in 2-D.
+//! `slamd replay FILE` on a 3-D graph: the engine in this process or a
+//! daemon serving 3-D graphs, the same stream, latency and prefix checks
+//! as in 2-D.
 
-use super::{replay, EmbeddedSink, ReplayOpts, Report};
+use super::{replay, DaemonSink, EmbeddedSink, ReplayOpts, Report, Sink};
 use anyhow::bail;
 use slamd::config::Config;
 use slamd::engine::Engine;
 use slamd::graph::{Pose3, PoseGraph};
 use slamd::io;
 use slamd::solver::{solve_batch3, BatchOptions};
+use std::time::Duration;
 
 pub fn run(
     opts: &ReplayOpts,
@@ -15,9 +17,6 @@ pub fn run(
     graph: PoseGraph<Pose3>,
     skipped: serde_json::Value,
 ) -> anyhow::Result<()> {
-    if !opts.embedded {
-        bail!("the daemon serves 2-D graphs; replay a 3-D graph with --embedded");
-    }
     if opts.gps.gps.is_some() {
         bail!("--gps is not available for 3-D graphs");
     }
@@ -30,8 +29,19 @@ pub fn run(
     let checkpoints: Vec<usize> = (1..=opts.check_prefixes)
         .map(|i| (i * graph.len() / (opts.check_prefixes + 1)).max(1))
         .collect();
-    let mut sink = EmbeddedSink(Engine::<Pose3>::create(super::engine_config(opts, config)));
-    let out = replay(&graph, &[], &mut sink, &checkpoints, false, |_| {})?;
+    let (mut embedded, mut daemon);
+    let sink: &mut dyn Sink<Pose3> = if opts.embedded {
+        embedded = EmbeddedSink(Engine::<Pose3>::create(super::engine_config(opts, config)));
+        &mut embedded
+    } else {
+        if opts.rate.is_some_and(|r| r.is_nan() || r <= 0.0) {
+            bail!("--rate must be > 0");
+        }
+        let timeout = Duration::from_secs_f64(opts.timeout);
+        daemon = DaemonSink::connect(&config.namespace, config, timeout, opts.rate, 3)?;
+        &mut daemon
+    };
+    let out = replay(&graph, &[], sink, &checkpoints, false, |_| {})?;
     if let Some(path) = &opts.out {
         let file = std::fs::File::create(path)?;
         io::write_g2o3(&mut std::io::BufWriter::new(file), &graph, &out.poses)?;
@@ -40,8 +50,8 @@ pub fn run(
         .as_ref()
         .and_then(|t| slamd::eval::ate3(&graph, &out.poses, t))
         .map(|a| a.rmse);
-    let stats = sink.0.stats();
-    let report = Report::of(&graph, out, "embedded", Some(stats), ate, |prefix| {
+    let (mode, stats) = (sink.mode(), sink.engine_stats());
+    let report = Report::of(&graph, out, mode, stats, ate, |prefix| {
         let options = BatchOptions {
             polish: true,
             ..Default::default()
@@ -54,7 +64,7 @@ pub fn run(
             report.json(opts, skipped, serde_json::json!({ "dimension": "3d" }))
         );
     } else {
-        report.print(opts, "embedded, 3-D", || {});
+        report.print(opts, &format!("{mode}, 3-D"), || {});
     }
     Ok(())
 }
