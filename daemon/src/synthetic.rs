@@ -183,24 +183,33 @@ pub struct World3 {
 /// Storey height of [`generate3`]'s building (m).
 pub const STOREY: f64 = 3.0;
 
+/// How many times better [`generate3`]'s roll and pitch are measured
+/// than its heading.
+pub const GRAVITY_ALIGNED: f64 = 10.0;
+
 /// A building of `storeys` floors: the drive of [`generate`] split into
-/// `storeys` equal parts, part `f` on floor `f` (`z = f · STOREY`), each
-/// floor reached from the one below by a lift at the spot where the drive
-/// got to (one odometry step straight up). Loop closures join keyframes
-/// on one floor, by the same rule as in 2-D; every measurement carries
-/// noise of σ `sigma_xy` per axis and `sigma_theta` per angle (roll, pitch,
-/// yaw), and the matching information.
+/// `storeys + 1` equal parts, part `f` on floor `f` (`z = f · STOREY`) and
+/// the last back on the ground floor, each floor reached by a lift at the
+/// spot where the drive got to (one odometry step straight up or down).
+/// The rides close one loop through every floor; other loop closures join
+/// keyframes on one floor, by the same rule as in 2-D. Every measurement
+/// carries noise of σ `sigma_xy` per axis, `sigma_theta` in yaw and
+/// `sigma_theta / GRAVITY_ALIGNED` in roll and pitch, and the matching
+/// information.
 pub fn generate3(params: &WorldParams, storeys: usize) -> World3 {
     let storeys = storeys.max(1);
     let plan = generate(params).truth;
     let n = plan.len();
-    let floor = |k: usize| k * storeys / n;
+    // parts 0..storeys on floors 0, 1, …, then back on the ground floor,
+    // so the lift rides close a loop through every floor
+    let floor = |k: usize| (k * (storeys + 1) / n) % storeys;
     // the plan's steps, except that where the floor changes the step is
-    // the lift: straight up, heading kept
+    // the lift: straight up or down, heading kept
     let mut truth = vec![Pose3::IDENTITY];
     for k in 1..n {
         let step = if floor(k) != floor(k - 1) {
-            Pose3::from_xyz_rpy([0.0, 0.0, STOREY, 0.0, 0.0, 0.0])
+            let rise = STOREY * (floor(k) as f64 - floor(k - 1) as f64);
+            Pose3::from_xyz_rpy([0.0, 0.0, rise, 0.0, 0.0, 0.0])
         } else {
             let s = plan[k - 1].between(&plan[k]);
             Pose3::from_xyz_rpy([s.x, s.y, 0.0, 0.0, 0.0, s.theta])
@@ -209,17 +218,20 @@ pub fn generate3(params: &WorldParams, storeys: usize) -> World3 {
         truth.push(next);
     }
     let mut rng = ChaCha8Rng::seed_from_u64(params.seed ^ 0x3d3d_3d3d);
+    // roll and pitch are observed through gravity (a visual-inertial
+    // frontend's IMU): their noise is a tenth of the heading's
     let (sx, st) = (params.sigma_xy, params.sigma_theta);
+    let sg = st / GRAVITY_ALIGNED;
     let info = {
-        let (t, r) = (1.0 / (sx * sx), 1.0 / (st * st));
+        let (t, g, r) = (1.0 / (sx * sx), 1.0 / (sg * sg), 1.0 / (st * st));
         // the quaternion vector is half the angles: Ω_q = 4 Ω_angles
         let mut u = [0.0; 21];
         for (i, v) in [
             (0, t),
             (6, t),
             (11, t),
-            (15, 4.0 * r),
-            (18, 4.0 * r),
+            (15, 4.0 * g),
+            (18, 4.0 * g),
             (20, 4.0 * r),
         ] {
             u[i] = v;
@@ -227,7 +239,7 @@ pub fn generate3(params: &WorldParams, storeys: usize) -> World3 {
         Information6::from_upper(u).expect("positive σ")
     };
     let noisy = |rng: &mut ChaCha8Rng, t: Pose3| {
-        let d = [sx, sx, sx, st, st, st].map(|s| s * gaussian(rng));
+        let d = [sx, sx, sx, sg, sg, st].map(|s| s * gaussian(rng));
         t.compose(&Pose3::from_xyz_rpy(d))
     };
     let graph = drive_edges(&truth, params, &mut rng, info, noisy);
@@ -259,7 +271,8 @@ mod tests {
         };
         let w = generate3(&p, 3);
         assert_eq!(w.graph.len(), 1500);
-        // three floors, 3 m apart, reached by two vertical steps
+        // three floors, 3 m apart, two rides up and one down to the ground
+        // floor
         let heights: std::collections::BTreeSet<i64> = w
             .truth
             .iter()
@@ -272,7 +285,11 @@ mod tests {
         let lifts = (1..1500)
             .filter(|&k| (w.truth[k].translation.z - w.truth[k - 1].translation.z).abs() > 1.0)
             .count();
-        assert_eq!(lifts, 2);
+        assert_eq!(lifts, 3);
+        assert!(
+            w.truth[1499].translation.z.abs() < 1e-9,
+            "the drive ends on the ground floor"
+        );
         let closures: Vec<_> = w
             .graph
             .edges()

@@ -1,17 +1,20 @@
 //! `slamd demo`: the README's first command. Starts a daemon, replays the
 //! built-in synthetic world (or `--dataset FILE`) into it over shared
-//! memory, prints latency and accuracy, and draws the map.
+//! memory, prints latency and accuracy, and draws the map. `--3d` does the
+//! same with the 3-D building and a daemon serving 3-D graphs.
 
-use crate::replay::{replay, DaemonSink, Latency};
+use crate::replay::{replay, DaemonSink, Latency, ReplayPose};
 use crate::solve::file_name;
+use crate::solve3::top_view;
 use anyhow::Context;
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use slamd::config::Config;
-use slamd::eval::{aligned_onto, ate};
-use slamd::graph::{chi2, KeyframeId, PoseGraph};
-use slamd::io::svg;
-use slamd::synthetic::{generate, WorldParams};
+use slamd::eval::{aligned_onto, ate, ate3, Ate};
+use slamd::geometry::Pose2;
+use slamd::graph::{chi2, KeyframeId, Pose3, PoseGraph};
+use slamd::io::{svg, AnyGraph, OnInvalid};
+use slamd::synthetic::{generate, generate3, WorldParams};
 use std::collections::HashMap;
 use std::path::PathBuf;
 use std::process::{Child, Command, Stdio};
@@ -31,16 +34,51 @@ pub struct DemoOpts {
     /// Where to write the picture.
     #[arg(long, default_value = "slamd-demo.svg")]
     pub out: PathBuf,
+    /// The 3-D world instead: the same drive through a building of
+    /// `--storeys` floors, streamed to a daemon serving 3-D graphs (the
+    /// picture is its top view).
+    #[arg(long = "3d")]
+    pub three_d: bool,
+    /// Storeys of the 3-D building.
+    #[arg(long, default_value_t = 3)]
+    pub storeys: usize,
+}
+
+/// What the demo does per dimension.
+trait DemoPose: ReplayPose + slamd::graph::EdgeCost {
+    /// The pose seen from above.
+    fn top(&self) -> Pose2;
+    /// ATE of `poses` against `truth`.
+    fn ate(graph: &PoseGraph<Self>, poses: &[Self], truth: &HashMap<KeyframeId, Self>) -> Option<Ate>;
+}
+
+impl DemoPose for Pose2 {
+    fn top(&self) -> Pose2 {
+        *self
+    }
+    fn ate(graph: &PoseGraph, poses: &[Pose2], truth: &HashMap<KeyframeId, Pose2>) -> Option<Ate> {
+        ate(graph, poses, truth)
+    }
+}
+
+impl DemoPose for Pose3 {
+    fn top(&self) -> Pose2 {
+        top_view(self)
+    }
+    fn ate(graph: &PoseGraph<Pose3>, poses: &[Pose3], truth: &HashMap<KeyframeId, Pose3>) -> Option<Ate> {
+        ate3(graph, poses, truth)
+    }
 }
 
 /// The daemon child process; stopped with SIGTERM when dropped.
 struct Daemon(Child);
 
 impl Daemon {
-    fn start(namespace: &str) -> anyhow::Result<Daemon> {
+    fn start(namespace: &str, dimension: u32) -> anyhow::Result<Daemon> {
         let exe = std::env::current_exe().context("locating the slamd binary")?;
         let child = Command::new(exe)
             .args(["run", "--namespace", namespace])
+            .env("SLAMD_DIMENSION", dimension.to_string())
             .env(
                 "SLAMD_LOG",
                 std::env::var("SLAMD_LOG").unwrap_or_else(|_| "error".into()),
@@ -70,28 +108,54 @@ impl Drop for Daemon {
 }
 
 pub fn run(opts: DemoOpts) -> anyhow::Result<()> {
-    let (name, graph, truth): (String, PoseGraph, Option<HashMap<KeyframeId, _>>) = match &opts.dataset {
-        Some(path) => (file_name(path), slamd::io::read_graph(path)?, None),
-        None => {
-            let w = generate(&WorldParams {
-                poses: opts.poses,
-                seed: opts.seed,
-                ..Default::default()
-            });
-            let truth = w.graph.keyframes().iter().map(|k| k.id).zip(w.truth).collect();
-            (
-                format!("synthetic world (seed {})", opts.seed),
-                w.graph,
-                Some(truth),
-            )
-        }
+    let params = WorldParams {
+        poses: opts.poses,
+        seed: opts.seed,
+        ..Default::default()
     };
+    let truth_of = |graph: &PoseGraph<_>, truth| -> HashMap<KeyframeId, _> {
+        graph.keyframes().iter().map(|k| k.id).zip(truth).collect()
+    };
+    match (&opts.dataset, opts.three_d) {
+        (Some(path), _) => match slamd::io::read_any_graph_with(path, OnInvalid::Refuse)?.0 {
+            AnyGraph::Planar(g) => show(&opts, &file_name(path), &g, None),
+            AnyGraph::Spatial(g) => show(&opts, &file_name(path), &g, None),
+        },
+        (None, false) => {
+            let w = generate(&params);
+            let truth = truth_of(&w.graph, w.truth);
+            let name = format!("synthetic world (seed {})", opts.seed);
+            show(&opts, &name, &w.graph, Some(&truth))
+        }
+        (None, true) => {
+            let w = generate3(&params, opts.storeys);
+            let truth = w.graph.keyframes().iter().map(|k| k.id).zip(w.truth).collect();
+            let name = format!(
+                "synthetic building, {} storeys (seed {})",
+                opts.storeys, opts.seed
+            );
+            show(&opts, &name, &w.graph, Some(&truth))
+        }
+    }
+}
+
+/// Streams `graph` through a daemon of its dimension, prints latency and
+/// accuracy against `truth` (if known) and draws the map from above.
+fn show<P: DemoPose>(
+    opts: &DemoOpts,
+    name: &str,
+    graph: &PoseGraph<P>,
+    truth: Option<&HashMap<KeyframeId, P>>,
+) -> anyhow::Result<()> {
     graph.check_connected()?;
     let config = Config::load(None)?;
     let namespace = format!("slamd-demo-{}", std::process::id());
-    println!("starting the daemon on namespace `{namespace}`");
-    let daemon = Daemon::start(&namespace)?;
-    let mut sink = connect(&namespace, &config)?;
+    println!(
+        "starting the daemon on namespace `{namespace}` ({}-D)",
+        P::DIMENSION
+    );
+    let daemon = Daemon::start(&namespace, P::DIMENSION)?;
+    let mut sink = connect(&namespace, &config, P::DIMENSION)?;
 
     println!(
         "{name}: {} keyframes, {} edges, streamed over shared memory",
@@ -102,17 +166,16 @@ pub fn run(opts: DemoOpts) -> anyhow::Result<()> {
         ProgressStyle::with_template("{bar:40} {pos}/{len} keyframes  {per_sec}  eta {eta}")
             .expect("valid template"),
     );
-    let out = replay(&graph, &[], &mut sink, &[], false, |_| bar.inc(1))?;
+    let out = replay(graph, &[], &mut sink, &[], false, |_| bar.inc(1))?;
     bar.finish_and_clear();
     drop(sink);
     let status = daemon.stop()?;
 
     let odometry = graph.compose_spanning_tree()?;
     let lat = Latency::of(out.latencies);
-    let ate_of = |p: &[slamd::geometry::Pose2]| {
+    let ate_of = |p: &[P]| {
         truth
-            .as_ref()
-            .and_then(|t| ate(&graph, p, t))
+            .and_then(|t| P::ate(graph, p, t))
             .map_or("–".to_string(), |a| format!("{:.3}", a.rmse))
     };
     println!();
@@ -125,25 +188,26 @@ pub fn run(opts: DemoOpts) -> anyhow::Result<()> {
     println!(
         "{:<22} {:>14.2} {:>10}",
         "odometry only",
-        chi2(&graph, &odometry),
+        chi2(graph, &odometry),
         ate_of(&odometry)
     );
     println!(
         "{:<22} {:>14.2} {:>10}",
         "slamd",
-        chi2(&graph, &out.poses),
+        chi2(graph, &out.poses),
         ate_of(&out.poses)
     );
 
-    let truth_poses: Option<Vec<_>> = truth.as_ref().map(|t| {
-        aligned_onto(
-            &graph.keyframes().iter().map(|k| t[&k.id]).collect::<Vec<_>>(),
-            &out.poses,
-        )
+    let top = |poses: &[P]| poses.iter().map(P::top).collect::<Vec<Pose2>>();
+    let estimate = top(&out.poses);
+    let truth_poses: Option<Vec<Pose2>> = truth.map(|t| {
+        let t: Vec<Pose2> = graph.keyframes().iter().map(|k| t[&k.id].top()).collect();
+        aligned_onto(&t, &estimate)
     });
+    let odometry = top(&odometry);
     let mut layers = vec![svg::Layer {
         label: "slamd",
-        poses: &out.poses,
+        poses: &estimate,
         color: svg::ESTIMATE,
     }];
     if let Some(t) = &truth_poses {
@@ -158,16 +222,20 @@ pub fn run(opts: DemoOpts) -> anyhow::Result<()> {
         poses: &odometry,
         color: svg::GUESS,
     });
-    svg::write_svg(&opts.out, &name, &layers).map_err(anyhow::Error::msg)?;
+    let title = match P::DIMENSION {
+        3 => format!("{name}, top view"),
+        _ => name.to_string(),
+    };
+    svg::write_svg(&opts.out, &title, &layers).map_err(anyhow::Error::msg)?;
     println!("map written to {}; daemon stopped ({status})", opts.out.display());
     Ok(())
 }
 
 /// Connects once the daemon's services exist (it needs a moment to start).
-fn connect(namespace: &str, config: &Config) -> anyhow::Result<DaemonSink> {
+fn connect(namespace: &str, config: &Config, dimension: u32) -> anyhow::Result<DaemonSink> {
     let deadline = Instant::now() + Duration::from_secs(10);
     loop {
-        match DaemonSink::connect(namespace, config, Duration::from_secs(10), None) {
+        match DaemonSink::connect(namespace, config, Duration::from_secs(10), None, dimension) {
             Ok(sink) => return Ok(sink),
             Err(e) if Instant::now() < deadline => {
                 tracing::debug!(error = %e, "Daemon not up yet.");
