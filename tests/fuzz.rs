@@ -371,6 +371,7 @@ fn small_map() -> slamd::store::MapFile {
         keyframe: 3,
         position,
         covariance: [4.0, 0.0, 0.0, 4.0],
+        height_variance: Some(9.0),
     };
     engine.add_gps(fix).unwrap();
     engine.update();

@@ -151,6 +151,7 @@ fn fix(k: usize, truth: &[Pose2]) -> FixInput {
         keyframe: k as u64,
         position: LocalFrame::new(origin()).to_geodetic(e.re, e.im, 0.0),
         covariance: [1e-8, 0.0, 0.0, 1e-8],
+        height_variance: None,
     }
 }
 

@@ -7,6 +7,7 @@ mod durable;
 mod formulations;
 mod fuzz;
 mod gps;
+mod gps3;
 mod incremental;
 mod outliers;
 mod restore;

@@ -341,7 +341,7 @@ fn calibrated(graph: &PoseGraph, gps: &GpsInput) -> Result<GpsInput, SolveError>
     let mut gps = gps.clone();
     if gps.calibrate {
         let chi2 = chi2(graph, &two_stage::solve(graph)?);
-        gps.weight = variance_factor(chi2, graph.edges().len(), graph.len());
+        gps.weight = variance_factor(chi2, graph.edges().len(), graph.len(), 3);
     }
     Ok(gps)
 }

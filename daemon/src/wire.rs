@@ -10,8 +10,8 @@ use slamd_protocol::codec::{gps_reason, reject, Origin};
 use slamd_protocol::{Pose, Rejection, RejectionReason, Switch};
 use slamd_types::RigidMotion;
 
-/// Keyframe `id`'s pose `p` in the map frame, with its planar ENU pose
-/// when the map is georeferenced (zeros before).
+/// Keyframe `id`'s pose `p` in the map frame, with its ENU position and
+/// heading when the map is georeferenced (zeros before).
 pub fn pose_out<P: RigidMotion>(id: KeyframeId, p: &P, georef: Option<&Georef>) -> Pose {
     let [x, y, z] = p.position3();
     let [qx, qy, qz, qw] = p.orientation();
@@ -29,7 +29,7 @@ pub fn pose_out<P: RigidMotion>(id: KeyframeId, p: &P, georef: Option<&Georef>) 
         theta,
         east: enu.x,
         north: enu.y,
-        up: 0.0,
+        up: georef.map_or(0.0, |g| z + g.up),
         heading: enu.theta,
     }
 }

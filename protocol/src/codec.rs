@@ -15,8 +15,8 @@
 use crate::message::{kind, INFORMATION_UPPER, POSE_PARAMS};
 use crate::{Edge, EdgeKindWire, GpsFix, Keyframe, Rejection, RejectionReason, PROTOCOL_VERSION};
 use slamd_types::{
-    check_covariance, EdgeInput, EdgeKind, FixInput, Geodetic, GpsError, InformationError, InformationMatrix,
-    KeyframeId, RigidMotion,
+    EdgeInput, EdgeKind, FixInput, Geodetic, GpsError, InformationError, InformationMatrix, KeyframeId,
+    RigidMotion,
 };
 
 /// Who sent a message and its number.
@@ -169,18 +169,20 @@ pub fn gps_in(m: &GpsFix) -> Result<(Origin, FixInput), Rejection> {
     };
     let ids = [m.keyframe, 0];
     check_version(o, kind::GPS, m.protocol, ids)?;
-    let height = if m.has_altitude != 0 { m.altitude } else { 0.0 };
-    let position = Geodetic::new(m.latitude, m.longitude, height);
-    let checked = position.and_then(|p| check_covariance(m.covariance).map(|_| p));
+    let has_altitude = m.has_altitude != 0;
+    let height = if has_altitude { m.altitude } else { 0.0 };
+    let height_variance = (has_altitude && m.altitude_variance != 0.0).then_some(m.altitude_variance);
+    let checked = Geodetic::new(m.latitude, m.longitude, height).and_then(|position| {
+        let fix = FixInput {
+            keyframe: m.keyframe,
+            position,
+            covariance: m.covariance,
+            height_variance,
+        };
+        fix.check().map(|_| fix)
+    });
     match checked {
-        Ok(position) => Ok((
-            o,
-            FixInput {
-                keyframe: m.keyframe,
-                position,
-                covariance: m.covariance,
-            },
-        )),
+        Ok(fix) => Ok((o, fix)),
         Err(e) => {
             let reason = gps_reason(&e);
             let text = format!(
@@ -209,7 +211,7 @@ pub fn gps_out(f: &FixInput, o: Origin) -> GpsFix {
         longitude: f.position.lon,
         altitude: f.position.height,
         covariance: f.covariance,
-        altitude_variance: 0.0,
+        altitude_variance: f.height_variance.unwrap_or(0.0),
         has_altitude: 1,
         frontend: o.frontend,
         sequence: o.sequence,
@@ -297,6 +299,7 @@ mod tests {
                 height: 0.0,
             },
             covariance: cov,
+            height_variance: None,
         };
         gps_out(
             &input,
@@ -324,6 +327,14 @@ mod tests {
             reason(fix(45.5, [1.0, 0.0, 0.0, -1.0])),
             RejectionReason::NotPositiveDefinite
         );
+        // a height's variance travels, and must be positive
+        let mut m = fix(45.5, [1.0, 0.0, 0.0, 1.0]);
+        m.altitude_variance = 4.0;
+        assert_eq!(gps_in(&m).unwrap().1.height_variance, Some(4.0));
+        m.altitude_variance = -1.0;
+        assert_eq!(reason(m), RejectionReason::NotPositiveDefinite);
+        m.altitude_variance = f64::NAN;
+        assert_eq!(reason(m), RejectionReason::NonFinite);
         let mut old = fix(45.5, [1.0, 0.0, 0.0, 1.0]);
         old.protocol = PROTOCOL_VERSION - 1;
         assert_eq!(reason(old), RejectionReason::ProtocolVersion);

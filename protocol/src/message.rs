@@ -118,10 +118,11 @@ pub struct GpsFix {
     pub altitude: f64,
     /// Covariance of (east, north) in m², row-major 2×2.
     pub covariance: [f64; 4],
-    /// Variance of the altitude (m²), valid if `has_altitude != 0`: a 3-D
-    /// daemon constrains the keyframe's height with it.
+    /// Variance of the altitude (m²), read if `has_altitude != 0`: a 3-D
+    /// daemon holds the keyframe's height to the fix with it; 0 leaves the
+    /// height free.
     pub altitude_variance: f64,
-    /// 1 when `altitude` and `altitude_variance` are set.
+    /// 1 when `altitude` (and `altitude_variance`) are set.
     pub has_altitude: u32,
     /// The sending frontend.
     pub frontend: u32,

@@ -1,6 +1,6 @@
 //! What a frontend hands slamd: keyframe ids, edges and GPS fixes.
 
-use crate::{Geodetic, Pose2, RigidMotion};
+use crate::{check_covariance, Geodetic, GpsError, Pose2, RigidMotion};
 
 /// A keyframe's id, chosen by the frontend (unique per map).
 pub type KeyframeId = u64;
@@ -81,4 +81,21 @@ pub struct FixInput {
     pub position: Geodetic,
     /// Covariance of (east, north) in m², row-major.
     pub covariance: [f64; 4],
+    /// Variance of the height (m²): a 3-D map's keyframe is held to the
+    /// fix's height with it. `None` leaves the height free (and a 2-D map
+    /// ignores it).
+    pub height_variance: Option<f64>,
+}
+
+impl FixInput {
+    /// Checks the covariance ([`check_covariance`]) and the height's
+    /// variance, which must be finite and positive when given.
+    pub fn check(&self) -> Result<(), GpsError> {
+        check_covariance(self.covariance)?;
+        match self.height_variance {
+            Some(v) if !v.is_finite() => Err(GpsError::NonFinite),
+            Some(v) if v <= 0.0 => Err(GpsError::NotPositiveDefinite),
+            _ => Ok(()),
+        }
+    }
 }

@@ -79,10 +79,9 @@ pub use slamd_types::{EdgeInput, FixInput};
 pub use snapshot::Snapshot;
 
 use crate::geometry::Pose2;
-use crate::gps::{covariance, Geodetic, GpsFix, LocalFrame};
+use crate::gps::{Geodetic, GpsFix, LocalFrame};
 use crate::graph::KeyframeId;
 use background::Background;
-use faer::c64;
 use op::Polish;
 use schedule::Schedule;
 use state::State;
@@ -495,24 +494,17 @@ impl<P: EnginePose> Engine<P> {
     /// ENU origin unless the configuration names one. Fixes enter the
     /// estimate as absolute position priors once a re-solve has
     /// georeferenced the map; one starts as soon as two fixes are in, and
-    /// again whenever their number has doubled. A 3-D engine refuses fixes
-    /// ([`EngineError::Unsupported`]).
+    /// again whenever their number has doubled. In 3-D a fix with a
+    /// height variance also holds the keyframe's height.
     pub fn add_gps(&mut self, fix: FixInput) -> Result<(), EngineError> {
-        if P::DIMENSION != 2 {
-            return Err(EngineError::Unsupported("GPS fixes constrain 2-D maps only"));
-        }
         let p = fix.position;
         let position = Geodetic::new(p.lat, p.lon, p.height).map_err(EngineError::Gps)?;
-        let cov = covariance(fix.covariance).map_err(EngineError::Gps)?;
+        fix.check().map_err(EngineError::Gps)?;
         let k =
             (self.state.model.graph.index_of(fix.keyframe)).ok_or(EngineError::FixKeyframe(fix.keyframe))?;
         let frame = *self.frame.get_or_insert(LocalFrame::new(position));
-        let (e, n, _) = frame.to_enu(&position);
-        self.submit(Op::Gps(GpsFix {
-            keyframe: k,
-            enu: c64::new(e, n),
-            covariance: cov,
-        }))?;
+        let gps = GpsFix::from_input(&fix, k, &frame).map_err(EngineError::Gps)?;
+        self.submit(Op::Gps(gps))?;
         self.fixes.push(fix);
         Ok(())
     }

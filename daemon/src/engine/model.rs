@@ -101,7 +101,7 @@ impl<P: EnginePose> Model<P> {
     /// The prior of fix `f` under the current georeference.
     pub(super) fn prior(&self, f: usize) -> Option<PositionPrior<P>> {
         let g = self.georef.as_ref()?;
-        P::gps_prior(&self.fixes[f], g, self.gps_weight)
+        Some(P::gps_prior(&self.fixes[f], g, self.gps_weight))
     }
 }
 
@@ -271,7 +271,7 @@ impl<P: EnginePose> Model<P> {
     /// With two or more fixes on the joined keyframes: sets the GPS weight
     /// from the polished graph's χ², fits the georeference to `poses`
     /// (compact: `compact[k]` is keyframe `k`'s index), polishes with the
-    /// fixes as priors and refits, twice ([`EnginePose::georeference`]).
+    /// fixes as priors and refits, twice ([`GpsInput::georeference`](crate::gps::GpsInput::georeference)).
     pub(super) fn georeference(
         &mut self,
         config: &GpsConfig,
@@ -280,7 +280,7 @@ impl<P: EnginePose> Model<P> {
         poses: &mut Vec<P>,
         params: &LevenbergMarquardtParams,
     ) {
-        P::georeference(self, config, edges, compact, poses, params)
+        self.georeference_fixes(config, edges, compact, poses, params)
     }
 
     /// Keyframes (other than the gauge) left without any weighted edge are
@@ -316,16 +316,15 @@ impl<P: EnginePose> Model<P> {
             }
         }
     }
-}
 
-impl Model {
-    /// [`Model::georeference`] in the plane.
-    pub(super) fn georeference_planar(
+    /// [`Model::georeference`]'s work: the fixes on joined keyframes, in
+    /// `compact` numbering, fitted and polished in.
+    fn georeference_fixes(
         &mut self,
         config: &GpsConfig,
-        edges: &[Edge],
+        edges: &[Edge<P>],
         compact: &[usize],
-        poses: &mut Vec<Pose2>,
+        poses: &mut Vec<P>,
         params: &LevenbergMarquardtParams,
     ) {
         let fixes: Vec<GpsFix> = (self.fixes.iter())
@@ -340,7 +339,7 @@ impl Model {
         }
         let mut input = GpsInput::with_config(fixes, config);
         if config.calibrate {
-            input.weight = variance_factor(chi2_of_edges(edges, poses), edges.len(), poses.len());
+            input.weight = variance_factor(chi2_of_edges(edges, poses), edges.len(), poses.len(), P::DOF);
         }
         // a polish that fails ends the rounds with the fit it started from:
         // repeating it from the same poses would fail the same way

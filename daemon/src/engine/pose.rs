@@ -4,19 +4,18 @@
 //! Each item is either the same math written for one dimension (the
 //! whitened rows of an edge, its innovation test, the linear initialiser a
 //! re-solve starts from) or a feature only the plane has so far (the
-//! two-stage incremental system, GPS, the cycle test and PCM), which the
+//! two-stage incremental system, the cycle test and PCM), which the
 //! spatial pose declines: [`EnginePose::check`] names them and
 //! [`Engine::create`](super::Engine::create) turns them off with a
 //! warning, so they are never asked for.
 
 use super::linear_stages::LinearStages;
-use super::model::Model;
 use super::EngineConfig;
 use crate::geometry::{Pose2, Turns};
-use crate::gps::{Georef, GpsConfig, GpsFix};
+use crate::gps::GpsPose;
 use crate::graph::{edge_error_turned, Edge, Pose3, PoseGraph};
 use crate::linear::{chordal, two_stage};
-use crate::nonlinear::{se2, se3, LevenbergMarquardtParams, LiePose, PositionPrior};
+use crate::nonlinear::{se2, se3, LiePose, PositionPrior};
 use crate::outliers::consistency::ConsistencyGraph;
 use crate::outliers::{cycles, OutlierConfig};
 use crate::sparse::dynamic::UpdateError;
@@ -26,7 +25,7 @@ use std::ops::Index;
 use std::sync::Mutex;
 
 /// A pose type the engine can run on.
-pub trait EnginePose: LiePose {
+pub trait EnginePose: LiePose + GpsPose {
     /// `Lᵀ J`, `DOF × 2·DOF`, with `Ω = L Lᵀ`.
     type Rows: Index<(usize, usize), Output = f64>;
     /// `−Lᵀ e`, `DOF` long.
@@ -85,19 +84,6 @@ pub trait EnginePose: LiePose {
         ids: &[usize],
         switchable: &[bool],
     ) -> Vec<bool>;
-
-    /// A GPS fix's prior under `georef` (planar only).
-    fn gps_prior(fix: &GpsFix, georef: &Georef, weight: f64) -> Option<PositionPrior<Self>>;
-
-    /// Georeferences the model's fixes onto `poses` (planar only).
-    fn georeference(
-        model: &mut Model<Self>,
-        config: &GpsConfig,
-        edges: &[Edge<Self>],
-        compact: &[usize],
-        poses: &mut Vec<Self>,
-        params: &LevenbergMarquardtParams,
-    );
 
     /// Why `config` cannot run on this dimension, if it cannot.
     fn check(config: &EngineConfig) -> Result<(), String>;
@@ -280,21 +266,6 @@ impl EnginePose for Pose2 {
         pcm.held_out(ids, switchable)
     }
 
-    fn gps_prior(fix: &GpsFix, georef: &Georef, weight: f64) -> Option<PositionPrior> {
-        Some(fix.prior(georef, weight))
-    }
-
-    fn georeference(
-        model: &mut Model,
-        config: &GpsConfig,
-        edges: &[Edge],
-        compact: &[usize],
-        poses: &mut Vec<Pose2>,
-        params: &LevenbergMarquardtParams,
-    ) {
-        model.georeference_planar(config, edges, compact, poses, params)
-    }
-
     fn check(_: &EngineConfig) -> Result<(), String> {
         Ok(())
     }
@@ -316,10 +287,14 @@ impl EnginePose for Pose3 {
         se3::jacobian(edge, xi, xj).0
     }
 
-    /// `e = p − target`, `J = [R 0]` on `(u, v)`: three rows on `u`.
+    /// `e = p − target`, `J = [R 0]` on `(u, v)`: three rows on `u`. Ω
+    /// may be singular (a fix that leaves the height free): `L = V √Λ`
+    /// from its eigen-decomposition, a zero row for a free direction.
     fn prior_rows(&self, prior: &PositionPrior<Pose3>) -> Vec<(Vec<(usize, f64)>, f64)> {
         let e = self.translation - prior.target;
-        let lt = sqrt_information(&prior.information).transpose();
+        let eigen = prior.information.symmetric_eigen();
+        let root = eigen.eigenvalues.map(|v| v.max(0.0).sqrt());
+        let lt = (eigen.eigenvectors * Matrix3::from_diagonal(&root)).transpose();
         let rows = lt * self.rotation.to_rotation_matrix().into_inner();
         let tails = -(lt * e);
         (0..3)
@@ -358,20 +333,6 @@ impl EnginePose for Pose3 {
         _: &[bool],
     ) -> Vec<bool> {
         Vec::new()
-    }
-
-    fn gps_prior(_: &GpsFix, _: &Georef, _: f64) -> Option<PositionPrior<Pose3>> {
-        None
-    }
-
-    fn georeference(
-        _: &mut Model<Pose3>,
-        _: &GpsConfig,
-        _: &[Edge<Pose3>],
-        _: &[usize],
-        _: &mut Vec<Pose3>,
-        _: &LevenbergMarquardtParams,
-    ) {
     }
 
     fn check(config: &EngineConfig) -> Result<(), String> {

@@ -18,9 +18,8 @@ use super::op::Polish;
 use super::rebuild::{factorise, rebuild};
 use super::state::State;
 use super::{EngineConfig, EngineError, EnginePose, FixInput};
-use crate::gps::{covariance, Geodetic, GpsFix, LocalFrame};
+use crate::gps::{Geodetic, GpsFix, LocalFrame};
 use crate::store::{MapEdge, MapFile, MapKeyframe, SavedGeoref};
-use faer::c64;
 use std::collections::VecDeque;
 
 /// The state of `map`'s graph, with its GPS fixes in `frame`, polished
@@ -129,15 +128,9 @@ fn fix_of<P: EnginePose>(
 ) -> Result<GpsFix, EngineError> {
     let p = f.position;
     let position = Geodetic::new(p.lat, p.lon, p.height).map_err(EngineError::Gps)?;
-    let cov = covariance(f.covariance).map_err(EngineError::Gps)?;
     let k = (model.graph.index_of(f.keyframe)).ok_or(EngineError::FixKeyframe(f.keyframe))?;
     let frame = frame.unwrap_or_else(|| LocalFrame::new(position));
-    let (e, n, _) = frame.to_enu(&position);
-    Ok(GpsFix {
-        keyframe: k,
-        enu: c64::new(e, n),
-        covariance: cov,
-    })
+    GpsFix::from_input(f, k, &frame).map_err(EngineError::Gps)
 }
 
 /// The map `state` holds (its edges' origins, the acknowledgements and

@@ -17,6 +17,9 @@ pub struct Georef {
     pub rotation: c64,
     /// The ENU position of the map origin.
     pub translation: c64,
+    /// The height of the map's `z = 0` in ENU (m): `up = z + self.up`. Fitted
+    /// to fixes with a held height, in 3-D only (0 in the plane).
+    pub up: f64,
 }
 
 impl Georef {
@@ -45,6 +48,7 @@ impl Georef {
         Some(Georef {
             rotation,
             translation: ce - rotation * cm,
+            up: 0.0,
         })
     }
 
@@ -82,6 +86,7 @@ mod tests {
         let truth = Georef {
             rotation: c64::from_polar(1.0, 0.7),
             translation: c64::new(100.0, -30.0),
+            up: 0.0,
         };
         let map = [c64::new(0.0, 0.0), c64::new(5.0, 1.0), c64::new(-2.0, 7.0)];
         let pairs: Vec<_> = map

@@ -20,11 +20,12 @@ pub use slamd_types::{check_covariance, GpsError};
 pub use triangles::{Triangle, TriangleParams};
 
 use crate::geometry::Pose2;
-use crate::graph::Edge;
-use crate::nonlinear::{polish, LevenbergMarquardtParams, LmReport, PositionPrior, Problem};
+use crate::graph::{Edge, Pose3};
+use crate::nonlinear::{polish, LevenbergMarquardtParams, LiePose, LmReport, PositionPrior, Problem};
 use crate::sparse::FactorError;
 use faer::c64;
-use nalgebra::Matrix2;
+use nalgebra::{Matrix2, Matrix3, Vector3};
+use slamd_types::FixInput;
 
 /// The `[gps]` settings.
 ///
@@ -116,19 +117,36 @@ impl GpsInput {
     }
 
     /// The map→ENU motion fitted to `poses`, weighting each fix by its
-    /// inverse variance.
-    pub fn fit(&self, poses: &[Pose2]) -> Option<Georef> {
-        let pairs: Vec<_> = self
-            .fixes
-            .iter()
-            .map(|f| (poses[f.keyframe].position(), f.enu, 1.0 / f.variance()))
+    /// inverse variance: the rotation about up and the (east, north) shift
+    /// from the positions' `x, y` ([`Georef::fit`]); in space, the up shift
+    /// from the fixes with a held height (their inverse-variance weighted
+    /// mean of `up − z`).
+    pub fn fit<P: GpsPose>(&self, poses: &[P]) -> Option<Georef> {
+        let pairs: Vec<_> = (self.fixes.iter())
+            .map(|f| {
+                let [x, y, _] = poses[f.keyframe].position3();
+                (c64::new(x, y), f.enu, 1.0 / f.variance())
+            })
             .collect();
-        Georef::fit(&pairs)
+        let mut georef = Georef::fit(&pairs)?;
+        if P::DOF == 6 {
+            let held = self.fixes.iter().filter(|f| f.up_variance > 0.0);
+            let (sum, weight) = held.fold((0.0, 0.0), |(s, w), f| {
+                let z = poses[f.keyframe].position3()[2];
+                (s + (f.up - z) / f.up_variance, w + 1.0 / f.up_variance)
+            });
+            if weight > 0.0 {
+                georef.up = sum / weight;
+            }
+        }
+        Some(georef)
     }
 
     /// Each fix as a position prior in the map frame of `georef`.
-    pub fn priors(&self, georef: &Georef) -> Vec<PositionPrior> {
-        self.fixes.iter().map(|f| f.prior(georef, self.weight)).collect()
+    pub fn priors<P: GpsPose>(&self, georef: &Georef) -> Vec<PositionPrior<P>> {
+        (self.fixes.iter())
+            .map(|f| P::gps_prior(f, georef, self.weight))
+            .collect()
     }
 
     /// Georeferences `poses` by alternation, `rounds` times: take the
@@ -147,14 +165,14 @@ impl GpsInput {
     /// first one fails nothing changes. On a polish error, `poses` are
     /// those the failing round started from and `georef` the `g` it used.
     /// Returns the report of the last polish, `None` when no round ran.
-    pub fn georeference(
+    pub fn georeference<P: GpsPose>(
         &self,
-        edges: &[Edge],
-        poses: &mut Vec<Pose2>,
+        edges: &[Edge<P>],
+        poses: &mut Vec<P>,
         georef: &mut Option<Georef>,
         params: LevenbergMarquardtParams,
         rounds: usize,
-    ) -> Result<Option<LmReport>, FactorError> {
+    ) -> Result<Option<LmReport<P>>, FactorError> {
         let mut last = None;
         for _ in 0..rounds {
             let Some(g) = georef.or_else(|| self.fit(poses)) else {
@@ -175,7 +193,8 @@ impl GpsInput {
 pub const MIN_REDUNDANCY: usize = 30;
 
 /// The a-posteriori variance factor `σ̂₀² = χ² / r` of a solved pose graph,
-/// `r = 3(m − n + 1)` its redundancy (m edges, n keyframes, connected).
+/// `r = d(m − n + 1)` its redundancy (m edges, n keyframes, connected, `d`
+/// degrees of freedom per edge: 3 in the plane, 6 in space).
 ///
 /// Scaling every edge's information by one factor leaves the graph's
 /// optimum unchanged, so datasets are often published with information that
@@ -185,8 +204,8 @@ pub const MIN_REDUNDANCY: usize = 30;
 /// balance (Helmert's variance-component estimate with one group). Returns
 /// 1 when `r < MIN_REDUNDANCY` (odometry alone has r = 0), and clamps to
 /// `[1e-4, 1e4]`.
-pub fn variance_factor(chi2: f64, edges: usize, keyframes: usize) -> f64 {
-    let r = 3 * (edges + 1).saturating_sub(keyframes);
+pub fn variance_factor(chi2: f64, edges: usize, keyframes: usize, dof: usize) -> f64 {
+    let r = dof * (edges + 1).saturating_sub(keyframes);
     if r < MIN_REDUNDANCY || !chi2.is_finite() {
         return 1.0;
     }
@@ -202,9 +221,29 @@ pub struct GpsFix {
     pub enu: c64,
     /// Covariance of (east, north), m².
     pub covariance: Matrix2<f64>,
+    /// Up (m).
+    pub up: f64,
+    /// Variance of `up` (m²); 0 leaves the height free.
+    pub up_variance: f64,
 }
 
 impl GpsFix {
+    /// `fix` taken at keyframe index `keyframe`, in `frame`'s ENU; checked
+    /// as the wire checks it.
+    pub fn from_input(fix: &FixInput, keyframe: usize, frame: &LocalFrame) -> Result<GpsFix, GpsError> {
+        let p = fix.position;
+        let position = Geodetic::new(p.lat, p.lon, p.height)?;
+        fix.check()?;
+        let (e, n, u) = frame.to_enu(&position);
+        Ok(GpsFix {
+            keyframe,
+            enu: c64::new(e, n),
+            covariance: covariance(fix.covariance)?,
+            up: u,
+            up_variance: fix.height_variance.unwrap_or(0.0),
+        })
+    }
+
     /// Mean variance per axis, `tr Σ / 2` (the σ² of paper A's equations).
     pub fn variance(&self) -> f64 {
         self.covariance.trace() / 2.0
@@ -225,6 +264,39 @@ impl GpsFix {
     }
 }
 
+/// A pose a GPS fix can hold: the fix as a prior on its position.
+pub trait GpsPose: LiePose {
+    /// `fix` as a prior on its keyframe's position in the map frame of
+    /// `georef`, its information times `weight`.
+    fn gps_prior(fix: &GpsFix, georef: &Georef, weight: f64) -> PositionPrior<Self>;
+}
+
+impl GpsPose for Pose2 {
+    fn gps_prior(fix: &GpsFix, georef: &Georef, weight: f64) -> PositionPrior {
+        fix.prior(georef, weight)
+    }
+}
+
+impl GpsPose for Pose3 {
+    /// `p_k ≈ (R⁻¹(en − t), up − u₀)`, Ω block-diagonal: the plane's
+    /// `(Rᵀ Σ R)⁻¹` and `1 / σ²_up` (0 when the height is free).
+    fn gps_prior(fix: &GpsFix, georef: &Georef, weight: f64) -> PositionPrior<Pose3> {
+        let plane = fix.prior(georef, 1.0);
+        let mut information = Matrix3::zeros();
+        information
+            .fixed_view_mut::<2, 2>(0, 0)
+            .copy_from(&plane.information);
+        if fix.up_variance > 0.0 {
+            information[(2, 2)] = 1.0 / fix.up_variance;
+        }
+        PositionPrior {
+            keyframe: fix.keyframe,
+            target: Vector3::new(plane.target.re, plane.target.im, fix.up - georef.up),
+            information: information * weight,
+        }
+    }
+}
+
 /// Checks a 2×2 covariance (row-major): finite, symmetric, positive
 /// definite ([`check_covariance`]).
 pub fn covariance(c: [f64; 4]) -> Result<Matrix2<f64>, GpsError> {
@@ -239,11 +311,12 @@ mod tests {
     #[test]
     fn variance_factor_is_chi2_over_redundancy() {
         // 100 keyframes, 120 edges: r = 3 · 21 = 63
-        assert!((variance_factor(6.3, 120, 100) - 0.1).abs() < 1e-15);
+        assert!((variance_factor(6.3, 120, 100, 3) - 0.1).abs() < 1e-15);
+        assert!((variance_factor(12.6, 120, 100, 6) - 0.1).abs() < 1e-15);
         // a chain has no redundancy: trust the information
-        assert_eq!(variance_factor(5.0, 99, 100), 1.0);
-        assert_eq!(variance_factor(0.0, 120, 100), 1e-4);
-        assert_eq!(variance_factor(f64::NAN, 120, 100), 1.0);
+        assert_eq!(variance_factor(5.0, 99, 100, 3), 1.0);
+        assert_eq!(variance_factor(0.0, 120, 100, 3), 1e-4);
+        assert_eq!(variance_factor(f64::NAN, 120, 100, 3), 1.0);
     }
 
     /// The checks themselves are tested with `check_covariance`; the

@@ -140,6 +140,8 @@ mod tests {
             keyframe: k,
             enu: c64::new(x, y),
             covariance: Matrix2::identity(),
+            up: 0.0,
+            up_variance: 0.0,
         }
     }
 

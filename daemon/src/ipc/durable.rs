@@ -13,7 +13,7 @@ use super::acks::Acks;
 use super::engine_loop::EngineLoop;
 use crate::engine::{Engine, EngineError, EnginePose};
 use crate::store::{Cut, MapEdge, MapFile, MapKeyframe, Record, StateDir};
-use slamd_types::{check_covariance, KeyframeId};
+use slamd_types::KeyframeId;
 use std::collections::{HashMap, HashSet};
 use std::time::{Duration, Instant};
 
@@ -210,7 +210,7 @@ impl<P: EnginePose> Fold<P> {
                     origin: o,
                 }),
             },
-            Record::Fix(_, f) if check_covariance(f.covariance).is_err() => self.refused += 1,
+            Record::Fix(_, f) if f.check().is_err() => self.refused += 1,
             Record::Fix(_, f) => {
                 if self.ids.contains(&f.keyframe) {
                     map.fixes.push(f);

@@ -186,7 +186,7 @@ pub fn solve_gps(graph: &PoseGraph, gps: &GpsInput) -> Result<(Vec<Pose2>, Optio
                 break;
             };
             let mut system = base.clone();
-            for prior in gps.priors(&g) {
+            for prior in gps.priors::<Pose2>(&g) {
                 system.push(
                     &[(gauge_var(prior.keyframe, zero), c64::new(1.0, 0.0))],
                     prior.target,

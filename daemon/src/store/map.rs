@@ -20,11 +20,13 @@
 //! - acknowledgements: `frontend: u32, through: u64`, then the count and
 //!   the numbers taken beyond `through`;
 //! - held messages (edges and fixes waiting for their keyframe): each a
-//!   `u32` length and a journal record's payload.
+//!   `u32` length and a journal record's payload;
+//! - (not in version 1) the georeference's up offset (`f64`, 0 without
+//!   one) and each fix's height variance (`f64`, 0: the height is free).
 
 use super::bytes::{frame, unframe, Framed, Get, Put};
 use super::journal::{check_head, head, HEAD};
-use super::record::{get_edge, get_pose, put_edge, put_pose, Record};
+use super::record::{get_edge, get_fix, get_pose, put_edge, put_fix, put_pose, Record};
 use super::StoreError;
 use crate::gps::Georef;
 use crate::graph::{GraphError, PoseGraph};
@@ -160,9 +162,7 @@ impl<P: RigidMotion> MapFile<P> {
         p.f64s(&g);
         p.u64(self.fixes.len() as u64);
         for f in &self.fixes {
-            p.u64(f.keyframe);
-            p.f64s(&[f.position.lat, f.position.lon, f.position.height]);
-            p.f64s(&f.covariance);
+            put_fix(&mut p, f);
         }
         p.u64(self.acks.len() as u64);
         for a in &self.acks {
@@ -179,6 +179,10 @@ impl<P: RigidMotion> MapFile<P> {
             r.encode(&mut q);
             p.u32(q.0.len() as u32);
             p.0.extend_from_slice(&q.0);
+        }
+        p.f64(self.georef.map_or(0.0, |g| g.georef.up));
+        for f in &self.fixes {
+            p.f64(f.height_variance.unwrap_or(0.0));
         }
         let mut out = head(MAGIC, self.generation);
         out.reserve(8 + p.0.len());
@@ -301,20 +305,13 @@ fn decode_body<P: RigidMotion>(body: &[u8], generation: u64, version: u32) -> Re
             georef: Georef {
                 rotation: c64::new(rr, ri),
                 translation: c64::new(tr, ti),
+                up: 0.0,
             },
             weight,
         });
     }
     for _ in 0..g.count(64)? {
-        let keyframe = g.u64()?;
-        let [lat, lon, height] = g.f64s()?;
-        let covariance = g.f64s()?;
-        let position = Geodetic::new(lat, lon, height).map_err(|e| StoreError::Malformed(e.to_string()))?;
-        map.fixes.push(FixInput {
-            keyframe,
-            position,
-            covariance,
-        });
+        map.fixes.push(get_fix(&mut g, false)?);
     }
     for _ in 0..g.count(20)? {
         let frontend = g.u32()?;
@@ -334,6 +331,22 @@ fn decode_body<P: RigidMotion>(body: &[u8], generation: u64, version: u32) -> Re
             bytes.push(g.u8()?);
         }
         map.held.push(Record::decode(&bytes)?);
+    }
+    if version >= 2 {
+        let up = g.f64()?;
+        if let Some(s) = &mut map.georef {
+            s.georef.up = up;
+        }
+        for f in &mut map.fixes {
+            let v = g.f64()?;
+            f.height_variance = (v != 0.0).then_some(v);
+            if f.check().is_err() {
+                return Err(StoreError::Malformed(format!(
+                    "fix on keyframe {}: bad height variance {v}",
+                    f.keyframe
+                )));
+            }
+        }
     }
     g.finish()?;
     Ok(map)

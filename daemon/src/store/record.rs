@@ -11,6 +11,7 @@
 //! | 4   | refused     | none: refused on arrival, it only counts for the acknowledgement |
 //! | 5   | keyframe 3-D | `id: u64, has_guess: u8, x, y, z, qx, qy, qz, qw: f64` |
 //! | 6   | edge 3-D    | `from, to: u64, kind: u8, x, y, z, qx, qy, qz, qw: f64, Ω upper: 21 × f64` |
+//! | 7   | fix with a held height | a fix's body, then `height variance: f64` |
 //!
 //! A record of the other dimension than the reader's is an error
 //! ([`StoreError::Dimension`]), never a torn tail to cut off.
@@ -41,6 +42,7 @@ const FIX: u8 = 3;
 const REFUSED: u8 = 4;
 const KEYFRAME3: u8 = 5;
 const EDGE3: u8 = 6;
+const FIX_HEIGHT: u8 = 7;
 
 /// The tags of a keyframe and an edge in `dimension`.
 fn tags(dimension: u32) -> (u8, u8) {
@@ -65,6 +67,7 @@ impl<P: RigidMotion> Record<P> {
         let (tag, o) = match self {
             Record::Keyframe(o, ..) => (keyframe, o),
             Record::Edge(o, _) => (edge, o),
+            Record::Fix(o, f) if f.height_variance.is_some() => (FIX_HEIGHT, o),
             Record::Fix(o, _) => (FIX, o),
             Record::Refused(o) => (REFUSED, o),
         };
@@ -79,9 +82,10 @@ impl<P: RigidMotion> Record<P> {
             }
             Record::Edge(_, e) => put_edge(p, e),
             Record::Fix(_, f) => {
-                p.u64(f.keyframe);
-                p.f64s(&[f.position.lat, f.position.lon, f.position.height]);
-                p.f64s(&f.covariance);
+                put_fix(p, f);
+                if let Some(v) = f.height_variance {
+                    p.f64(v);
+                }
             }
             Record::Refused(_) => {}
         }
@@ -110,32 +114,42 @@ impl<P: RigidMotion> Record<P> {
                 Record::Keyframe(o, id, (has != 0).then_some(pose))
             }
             t if t == edge => Record::Edge(o, get_edge(&mut g)?),
-            FIX => {
-                let keyframe = g.u64()?;
-                let [lat, lon, height] = g.f64s()?;
-                let covariance = g.f64s()?;
-                let position = Geodetic::new(lat, lon, height)
-                    .map_err(|e| StoreError::Malformed(format!("fix on keyframe {keyframe}: {e}")))?;
-                if covariance.iter().any(|c| !c.is_finite()) {
-                    return Err(StoreError::Malformed(format!(
-                        "fix on keyframe {keyframe}: not finite"
-                    )));
-                }
-                Record::Fix(
-                    o,
-                    FixInput {
-                        keyframe,
-                        position,
-                        covariance,
-                    },
-                )
-            }
+            FIX => Record::Fix(o, get_fix(&mut g, false)?),
+            FIX_HEIGHT => Record::Fix(o, get_fix(&mut g, true)?),
             REFUSED => Record::Refused(o),
             t => return Err(StoreError::Malformed(format!("unknown record tag {t}"))),
         };
         g.finish()?;
         Ok(r)
     }
+}
+
+/// `keyframe, lat, lon, height, covariance` (without the height's
+/// variance).
+pub(super) fn put_fix(p: &mut Put, f: &FixInput) {
+    p.u64(f.keyframe);
+    p.f64s(&[f.position.lat, f.position.lon, f.position.height]);
+    p.f64s(&f.covariance);
+}
+
+/// A fix as [`put_fix`] wrote it, then its height's variance if
+/// `height_variance`; checked as on the wire.
+pub(super) fn get_fix(g: &mut Get<'_>, height_variance: bool) -> Result<FixInput, StoreError> {
+    let keyframe = g.u64()?;
+    let [lat, lon, height] = g.f64s()?;
+    let covariance = g.f64s()?;
+    let bad = |e: &dyn std::fmt::Display| StoreError::Malformed(format!("fix on keyframe {keyframe}: {e}"));
+    let position = Geodetic::new(lat, lon, height).map_err(|e| bad(&e))?;
+    let fix = FixInput {
+        keyframe,
+        position,
+        covariance,
+        height_variance: if height_variance { Some(g.f64()?) } else { None },
+    };
+    if covariance.iter().any(|c| !c.is_finite()) || fix.height_variance.is_some_and(|v| !v.is_finite()) {
+        return Err(bad(&"not finite"));
+    }
+    Ok(fix)
 }
 
 /// A pose's [`RigidMotion::PARAMS`] numbers.
@@ -223,6 +237,20 @@ mod tests {
                         height: 120.0,
                     },
                     covariance: [4.0, 0.1, 0.1, 9.0],
+                    height_variance: None,
+                },
+            ),
+            Record::Fix(
+                o(6),
+                FixInput {
+                    keyframe: 1,
+                    position: Geodetic {
+                        lat: 45.5,
+                        lon: 9.2,
+                        height: 121.0,
+                    },
+                    covariance: [4.0, 0.0, 0.0, 4.0],
+                    height_variance: Some(9.0),
                 },
             ),
             Record::Refused(o(5)),

@@ -169,6 +169,7 @@ fn sample_map() -> MapFile {
             georef: Georef {
                 rotation: c64::new(0.6, 0.8),
                 translation: c64::new(-3.0, 4.0),
+                up: 2.5,
             },
             weight: 0.5,
         }),
@@ -176,6 +177,7 @@ fn sample_map() -> MapFile {
             keyframe: 9,
             position: Geodetic::new(45.00001, 9.00001, 101.0).unwrap(),
             covariance: [4.0, 0.0, 0.0, 4.0],
+            height_variance: Some(9.0),
         }],
         acks: vec![AckState {
             frontend: 3,
@@ -268,10 +270,14 @@ fn a_directory_that_cannot_be_written_is_refused_at_start() {
 
 #[test]
 fn a_version_1_map_reads_as_2d() {
-    // version 1 had no dimension byte: the same body without it
-    let map = sample_map();
+    // version 1 had no dimension byte at the start, nor the georeference's
+    // up and the fixes' height variances at the end
+    let mut map = sample_map();
     let bytes = map.encode();
-    let body = &bytes[journal::HEAD + 8 + 1..];
+    let tail = 8 * (1 + map.fixes.len());
+    let body = &bytes[journal::HEAD + 8 + 1..bytes.len() - tail];
+    map.georef.as_mut().unwrap().georef.up = 0.0;
+    map.fixes[0].height_variance = None;
     let mut old = Vec::new();
     old.extend_from_slice(map::MAGIC);
     old.extend_from_slice(&1u32.to_le_bytes());

@@ -6,7 +6,7 @@ use clap::Args;
 use faer::c64;
 use slamd::engine::FixInput;
 use slamd::geometry::Pose2;
-use slamd::gps::{covariance, Geodetic, Georef, GpsFix, GpsInput, LocalFrame};
+use slamd::gps::{Geodetic, Georef, GpsFix, GpsInput, LocalFrame};
 use slamd::graph::PoseGraph;
 use std::path::PathBuf;
 
@@ -52,18 +52,15 @@ pub fn load(opts: &GpsOpts, graph: &PoseGraph) -> anyhow::Result<Option<LoadedGp
                 r.keyframe
             )
         })?;
-        let (e, n, _) = frame.to_enu(&r.position);
         let cov = [floor(r.sigma[0]).powi(2), 0.0, 0.0, floor(r.sigma[1]).powi(2)];
-        fixes.push(GpsFix {
-            keyframe: k,
-            enu: c64::new(e, n),
-            covariance: covariance(cov)?,
-        });
-        wire.push(FixInput {
+        let input = FixInput {
             keyframe: r.keyframe,
             position: r.position,
             covariance: cov,
-        });
+            height_variance: None,
+        };
+        fixes.push(GpsFix::from_input(&input, k, &frame)?);
+        wire.push(input);
         if let Some([te, tn]) = r.truth {
             truth.push((k, c64::new(te, tn)));
         }

@@ -4,7 +4,7 @@
 use super::Step;
 use faer::c64;
 use slamd::config::Config;
-use slamd::engine::{Engine, EnginePose, EngineStats, FixInput};
+use slamd::engine::{Engine, EnginePose, EngineStats};
 use slamd::geometry::Pose2;
 use slamd::graph::{KeyframeId, Pose3};
 use slamd::ipc::{Frontend, Snapshots};
@@ -41,11 +41,9 @@ pub trait Sink<P: slamd::graph::RigidMotion = Pose2> {
 /// The engine in this process.
 pub struct EmbeddedSink<P: EnginePose = Pose2>(pub Engine<P>);
 
-/// What a replay does per dimension: GPS is planar; a snapshot's poses
-/// read as the dimension's poses.
+/// What a replay does per dimension: a snapshot's poses read as the
+/// dimension's poses.
 pub trait ReplayPose: EnginePose {
-    /// Hands the engine `fixes`.
-    fn add_fixes(engine: &mut Engine<Self>, fixes: &[FixInput]) -> anyhow::Result<()>;
     /// The georeferenced (east, north) of every keyframe, once georeferenced.
     fn enu(engine: &Engine<Self>) -> HashMap<KeyframeId, c64>;
     /// A snapshot's pose, `None` if it does not make one.
@@ -53,12 +51,6 @@ pub trait ReplayPose: EnginePose {
 }
 
 impl ReplayPose for Pose2 {
-    fn add_fixes(engine: &mut Engine, fixes: &[FixInput]) -> anyhow::Result<()> {
-        for f in fixes {
-            engine.add_gps(*f)?;
-        }
-        Ok(())
-    }
     fn enu(engine: &Engine) -> HashMap<KeyframeId, c64> {
         let snap = engine.snapshot();
         snap.enu_poses().map(|(id, p)| (id, p.position())).collect()
@@ -69,12 +61,6 @@ impl ReplayPose for Pose2 {
 }
 
 impl ReplayPose for Pose3 {
-    fn add_fixes(_: &mut Engine<Pose3>, fixes: &[FixInput]) -> anyhow::Result<()> {
-        match fixes.is_empty() {
-            true => Ok(()),
-            false => anyhow::bail!("GPS fixes are not available for 3-D graphs"),
-        }
-    }
     fn enu(_: &Engine<Pose3>) -> HashMap<KeyframeId, c64> {
         HashMap::new()
     }
@@ -90,7 +76,9 @@ impl<P: ReplayPose> Sink<P> for EmbeddedSink<P> {
         for e in &step.edges {
             self.0.add_edge(*e)?;
         }
-        P::add_fixes(&mut self.0, &step.fixes)?;
+        for f in &step.fixes {
+            self.0.add_gps(*f)?;
+        }
         self.0.update();
         Ok(if step.edges.is_empty() {
             vec![]
