@@ -58,6 +58,7 @@ fn show(ns: &str, status: &slamd_protocol::DaemonStatus, json: bool) -> anyhow::
         .collect();
     let v = serde_json::json!({
         "namespace": ns,
+        "dimension": h.dimension,
         "uptime_s": age(status.started_at_ns),
         "keyframes": h.keyframes,
         "edges": h.edges,
@@ -82,7 +83,7 @@ fn show(ns: &str, status: &slamd_protocol::DaemonStatus, json: bool) -> anyhow::
         return Ok(());
     }
     let s = |k: &str| v[k].as_f64().map_or("-".into(), |x| format!("{x:.1}"));
-    println!("slamd on `{ns}`: up {} s", s("uptime_s"));
+    println!("slamd on `{ns}` ({}-D): up {} s", h.dimension, s("uptime_s"));
     println!(
         "  map        {} keyframes, {} edges, {} fixes; χ² {:.3}{}",
         h.keyframes,
