@@ -11,6 +11,10 @@
 //!   [`latest`](Snapshots::latest)) and its rejections.
 //! - `Embedded` is the same [`Publish`] API on an engine in this process,
 //!   for applications that embed slamd instead of talking to a daemon.
+//! - A daemon serving 3-D graphs (`dimension = 3`) takes spatial keyframes
+//!   and edges from [`Frontend::add_keyframe3`] and
+//!   [`Frontend::add_edge3`]; its snapshots' poses read back with
+//!   [`Pose::pose3`]. [`Publish`] and `Embedded` are planar.
 //!
 //! The example runs a daemon on a thread, so it needs `embedded`:
 #![cfg_attr(feature = "embedded", doc = "```")]
