@@ -5,7 +5,7 @@ use crate::daemon::Daemon;
 use faer::c64;
 use slamd::engine::{EdgeInput, Engine, EngineConfig, EngineError, FixInput};
 use slamd::geometry::Pose2;
-use slamd::gps::{Geodetic, GpsConfig, GpsError, LocalFrame};
+use slamd::gps::{Geodetic, GpsError, LocalFrame};
 use slamd::graph::{EdgeKind, Information};
 use slamd_client::{Frontend, Publish, RejectionReason, Snapshots};
 use slamd_tests::{dataset, run_json};
@@ -158,16 +158,7 @@ fn fix(k: usize, truth: &[Pose2]) -> FixInput {
 #[test]
 fn the_engine_georeferences_online() {
     let (truth, pairs) = lanes(120);
-    let config = EngineConfig {
-        gps: GpsConfig {
-            origin: Some(origin()),
-            ..GpsConfig::default()
-        },
-        // re-solves inline, so that the test sees when they happen
-        background: false,
-        ..EngineConfig::default()
-    };
-    let mut engine = Engine::new(config);
+    let mut engine = Engine::new(slamd_tests::gps_engine_config(origin()));
     let mut georeferenced_at = None;
     for k in 0..truth.len() {
         engine.add_keyframe(k as u64, None).unwrap();

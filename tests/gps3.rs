@@ -3,8 +3,8 @@
 
 use crate::daemon::Daemon;
 use faer::c64;
-use slamd::engine::{EdgeInput, Engine, EngineConfig, FixInput};
-use slamd::gps::{Geodetic, GpsConfig, LocalFrame};
+use slamd::engine::{EdgeInput, Engine, FixInput};
+use slamd::gps::{Geodetic, LocalFrame};
 use slamd::graph::{EdgeKind, Information6, Pose3};
 use slamd_client::{Frontend, Snapshots};
 use std::time::{Duration, Instant};
@@ -89,15 +89,7 @@ fn worst_errors(engine: &Engine<Pose3>, truth: &[Pose3]) -> (f64, f64, f64) {
 fn fixes_with_a_height_hold_the_map_up_included() {
     let truth = ramp(100);
     let run = |height: bool| {
-        let config = EngineConfig {
-            gps: GpsConfig {
-                origin: Some(origin()),
-                ..GpsConfig::default()
-            },
-            background: false,
-            ..EngineConfig::default()
-        };
-        let mut engine = Engine::<Pose3>::create(config);
+        let mut engine = Engine::<Pose3>::create(slamd_tests::gps_engine_config(origin()));
         for k in 0..truth.len() {
             engine.add_keyframe(k as u64, None).unwrap();
             if k > 0 {

@@ -164,3 +164,16 @@ pub fn replay(
     }
     (engine, sent)
 }
+
+/// The engine's defaults with the ENU frame at `origin` and re-solves
+/// inline, so that a test sees when they happen.
+pub fn gps_engine_config(origin: slamd::gps::Geodetic) -> EngineConfig {
+    EngineConfig {
+        gps: slamd::gps::GpsConfig {
+            origin: Some(origin),
+            ..Default::default()
+        },
+        background: false,
+        ..EngineConfig::default()
+    }
+}
