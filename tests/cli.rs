@@ -213,7 +213,7 @@ fn a_kernel_parameter_out_of_range_is_refused_by_name() {
 
 /// A 3-D file is detected and solved; the result written as g2o SE3 is
 /// read back by `slamd eval` to the same χ²; the embedded replay streams
-/// it to the same optimum, and the daemon path refuses it by name.
+/// it to the same optimum, and a 2-D daemon refuses it by name.
 #[test]
 fn solve_eval_and_replay_read_3d_graphs() {
     let file = dataset("3d/smallgrid3d.g2o");
@@ -244,4 +244,32 @@ fn solve_eval_and_replay_read_3d_graphs() {
         err.contains("serves 2-D graphs and this graph is 3-D; start one with SLAMD_DIMENSION=3"),
         "{err}"
     );
+}
+
+/// `--out FILE.tum` and `FILE.kitti` write what `slamd eval` reads back to
+/// the χ² the solve printed, in both dimensions, and with the ground truth
+/// to the same ATE.
+#[test]
+fn tum_and_kitti_trajectories_read_back_at_the_same_chi2() {
+    let planar = dataset("intel_sesync.g2o");
+    let spatial = dataset("3d/smallgrid3d.g2o");
+    for file in [planar, spatial] {
+        let file = file.to_str().expect("utf-8");
+        let solved = run_json(&["solve", file, "--polish", "--json"]);
+        let chi2 = solved["chi2"].as_f64().expect("chi2");
+        for ext in ["tum", "kitti"] {
+            let out = std::env::temp_dir().join(format!("slamd-traj-{}.{ext}", std::process::id()));
+            let out_s = out.to_str().expect("utf-8");
+            run_json(&["solve", file, "--polish", "--json", "--out", out_s]);
+            let lines = std::fs::read_to_string(&out).expect("written").lines().count() as u64;
+            assert_eq!(Some(lines), solved["nodes"].as_u64(), "{file} {ext}");
+            let scored = run_json(&["eval", file, out_s, "--json"]);
+            let _ = std::fs::remove_file(&out);
+            let back = scored["chi2"].as_f64().expect("chi2");
+            assert!(
+                (back - chi2).abs() <= 1e-9 * chi2,
+                "{file} {ext}: {back} against {chi2}"
+            );
+        }
+    }
 }

@@ -12,8 +12,10 @@ use std::path::PathBuf;
 pub struct EvalOpts {
     /// Graph file (its edges define the cost).
     pub graph: PathBuf,
-    /// Poses to score: a g2o file with vertices, or one pose per line
-    /// (`id x y theta`; in 3-D `id x y z qx qy qz qw`).
+    /// Poses to score: a g2o file with vertices, a trajectory (`.tum`:
+    /// `t x y z qx qy qz qw` with the keyframe id as `t`; `.kitti`: `[R | t]`
+    /// rows in keyframe order), or one pose per line (`id x y theta`; in
+    /// 3-D `id x y z qx qy qz qw`).
     pub poses: PathBuf,
     /// Ground truth: a pose table or a noise-free graph file.
     #[arg(long)]
@@ -26,7 +28,9 @@ pub struct EvalOpts {
 pub fn run(opts: EvalOpts) -> anyhow::Result<()> {
     match io::read_any_graph_with(&opts.graph, io::OnInvalid::Refuse)?.0 {
         io::AnyGraph::Planar(graph) => {
-            let table = if opts.poses.extension().is_some_and(|e| e == "g2o") {
+            let table = if let Some(layout) = io::Trajectory::of(&opts.poses) {
+                io::read_trajectory(&opts.poses, layout, &crate::solve::keyframe_ids(&graph))?
+            } else if opts.poses.extension().is_some_and(|e| e == "g2o") {
                 vertices(&io::read_graph(&opts.poses)?)
             } else {
                 io::read_pose_table(&opts.poses)?
@@ -41,7 +45,9 @@ pub fn run(opts: EvalOpts) -> anyhow::Result<()> {
             })
         }
         io::AnyGraph::Spatial(graph) => {
-            let table = if opts.poses.extension().is_some_and(|e| e == "g2o") {
+            let table = if let Some(layout) = io::Trajectory::of(&opts.poses) {
+                io::read_trajectory(&opts.poses, layout, &crate::solve::keyframe_ids(&graph))?
+            } else if opts.poses.extension().is_some_and(|e| e == "g2o") {
                 vertices(&io::read_graph3(&opts.poses)?)
             } else {
                 read_table3(&opts.poses)?

@@ -25,7 +25,9 @@ pub struct SolveOpts {
     /// Ground truth: a pose table or a noise-free graph file.
     #[arg(long)]
     pub ground_truth: Option<PathBuf>,
-    /// Write the result: `.g2o` as a graph, anything else as `id x y theta`.
+    /// Write the result: `.g2o` as a graph, `.tum` and `.kitti` as evo reads
+    /// them (TUM's time is the keyframe id), anything else as `id x y theta`
+    /// (in 3-D `id x y z qx qy qz qw`).
     #[arg(long)]
     pub out: Option<PathBuf>,
     /// Draw the estimate over the ground truth and the initial guess.
@@ -246,12 +248,19 @@ pub fn write_result(
 ) -> anyhow::Result<()> {
     let file = std::fs::File::create(out).with_context(|| format!("creating {}", out.display()))?;
     let mut w = std::io::BufWriter::new(file);
-    if out.extension().is_some_and(|e| e == "g2o") {
+    if let Some(layout) = io::Trajectory::of(out) {
+        io::write_trajectory(&mut w, layout, &keyframe_ids(graph), poses)?;
+    } else if out.extension().is_some_and(|e| e == "g2o") {
         io::write_g2o(&mut w, graph, poses)?;
     } else {
         io::write_pose_table(&mut w, graph, poses)?;
     }
     Ok(())
+}
+
+/// The graph's keyframe ids in order.
+pub fn keyframe_ids<P: slamd::graph::RigidMotion>(graph: &PoseGraph<P>) -> Vec<slamd::graph::KeyframeId> {
+    graph.keyframes().iter().map(|k| k.id).collect()
 }
 
 /// The graph without its loop closures.

@@ -33,7 +33,9 @@ pub fn run(opts: &SolveOpts, graph: &PoseGraph<Pose3>, skipped: serde_json::Valu
     if let Some(out) = &opts.out {
         let file = std::fs::File::create(out).with_context(|| format!("creating {}", out.display()))?;
         let mut w = std::io::BufWriter::new(file);
-        if out.extension().is_some_and(|e| e == "g2o") {
+        if let Some(layout) = io::Trajectory::of(out) {
+            io::write_trajectory(&mut w, layout, &crate::solve::keyframe_ids(graph), &sol.poses)?;
+        } else if out.extension().is_some_and(|e| e == "g2o") {
             io::write_g2o3(&mut w, graph, &sol.poses)?;
         } else {
             for (k, p) in graph.keyframes().iter().zip(&sol.poses) {

@@ -61,7 +61,9 @@ pub struct ReplayOpts {
     /// Turn the outlier filter off (--embedded).
     #[arg(long)]
     pub no_filter: bool,
-    /// Write the final estimate: `.g2o` as a graph, else `id x y theta`.
+    /// Write the result: `.g2o` as a graph, `.tum` and `.kitti` as evo reads
+    /// them (TUM's time is the keyframe id), anything else as `id x y theta`
+    /// (in 3-D `id x y z qx qy qz qw`).
     #[arg(long)]
     pub out: Option<PathBuf>,
     /// Write one line per keyframe: `k latency_us`, and with `--embedded`

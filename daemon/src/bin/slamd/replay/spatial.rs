@@ -43,8 +43,13 @@ pub fn run(
     };
     let out = replay(&graph, &[], sink, &checkpoints, false, |_| {})?;
     if let Some(path) = &opts.out {
-        let file = std::fs::File::create(path)?;
-        io::write_g2o3(&mut std::io::BufWriter::new(file), &graph, &out.poses)?;
+        let mut w = std::io::BufWriter::new(std::fs::File::create(path)?);
+        match io::Trajectory::of(path) {
+            Some(layout) => {
+                io::write_trajectory(&mut w, layout, &crate::solve::keyframe_ids(&graph), &out.poses)?
+            }
+            None => io::write_g2o3(&mut w, &graph, &out.poses)?,
+        }
     }
     let ate = truth
         .as_ref()
