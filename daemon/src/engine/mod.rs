@@ -497,14 +497,11 @@ impl<P: EnginePose> Engine<P> {
     /// again whenever their number has doubled. In 3-D a fix with a
     /// height variance also holds the keyframe's height.
     pub fn add_gps(&mut self, fix: FixInput) -> Result<(), EngineError> {
-        let p = fix.position;
-        let position = Geodetic::new(p.lat, p.lon, p.height).map_err(EngineError::Gps)?;
-        fix.check().map_err(EngineError::Gps)?;
+        let position = GpsFix::checked_position(&fix).map_err(EngineError::Gps)?;
         let k =
             (self.state.model.graph.index_of(fix.keyframe)).ok_or(EngineError::FixKeyframe(fix.keyframe))?;
         let frame = *self.frame.get_or_insert(LocalFrame::new(position));
-        let gps = GpsFix::from_input(&fix, k, &frame).map_err(EngineError::Gps)?;
-        self.submit(Op::Gps(gps))?;
+        self.submit(Op::Gps(GpsFix::at(&fix, &position, k, &frame)))?;
         self.fixes.push(fix);
         Ok(())
     }

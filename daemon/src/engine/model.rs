@@ -280,7 +280,28 @@ impl<P: EnginePose> Model<P> {
         poses: &mut Vec<P>,
         params: &LevenbergMarquardtParams,
     ) {
-        self.georeference_fixes(config, edges, compact, poses, params)
+        let fixes: Vec<GpsFix> = (self.fixes.iter())
+            .filter(|f| self.joined[f.keyframe])
+            .map(|f| GpsFix {
+                keyframe: compact[f.keyframe],
+                ..*f
+            })
+            .collect();
+        if !config.absolute || fixes.len() < 2 {
+            return;
+        }
+        let mut input = GpsInput::with_config(fixes, config);
+        if config.calibrate {
+            input.weight = variance_factor(chi2_of_edges(edges, poses), edges.len(), poses.len(), P::DOF);
+        }
+        // a polish that fails ends the rounds with the fit it started from:
+        // repeating it from the same poses would fail the same way
+        let mut georef = None;
+        let _ = input.georeference(edges, poses, &mut georef, *params, 2);
+        if let Some(g) = georef {
+            self.georef = Some(g);
+            self.gps_weight = input.weight;
+        }
     }
 
     /// Keyframes (other than the gauge) left without any weighted edge are
@@ -314,40 +335,6 @@ impl<P: EnginePose> Model<P> {
                     }
                 }
             }
-        }
-    }
-
-    /// [`Model::georeference`]'s work: the fixes on joined keyframes, in
-    /// `compact` numbering, fitted and polished in.
-    fn georeference_fixes(
-        &mut self,
-        config: &GpsConfig,
-        edges: &[Edge<P>],
-        compact: &[usize],
-        poses: &mut Vec<P>,
-        params: &LevenbergMarquardtParams,
-    ) {
-        let fixes: Vec<GpsFix> = (self.fixes.iter())
-            .filter(|f| self.joined[f.keyframe])
-            .map(|f| GpsFix {
-                keyframe: compact[f.keyframe],
-                ..*f
-            })
-            .collect();
-        if !config.absolute || fixes.len() < 2 {
-            return;
-        }
-        let mut input = GpsInput::with_config(fixes, config);
-        if config.calibrate {
-            input.weight = variance_factor(chi2_of_edges(edges, poses), edges.len(), poses.len(), P::DOF);
-        }
-        // a polish that fails ends the rounds with the fit it started from:
-        // repeating it from the same poses would fail the same way
-        let mut georef = None;
-        let _ = input.georeference(edges, poses, &mut georef, *params, 2);
-        if let Some(g) = georef {
-            self.georef = Some(g);
-            self.gps_weight = input.weight;
         }
     }
 }

@@ -126,11 +126,10 @@ fn fix_of<P: EnginePose>(
     model: &Model<P>,
     frame: Option<LocalFrame>,
 ) -> Result<GpsFix, EngineError> {
-    let p = f.position;
-    let position = Geodetic::new(p.lat, p.lon, p.height).map_err(EngineError::Gps)?;
+    let position = GpsFix::checked_position(f).map_err(EngineError::Gps)?;
     let k = (model.graph.index_of(f.keyframe)).ok_or(EngineError::FixKeyframe(f.keyframe))?;
     let frame = frame.unwrap_or_else(|| LocalFrame::new(position));
-    GpsFix::from_input(f, k, &frame).map_err(EngineError::Gps)
+    Ok(GpsFix::at(f, &position, k, &frame))
 }
 
 /// The map `state` holds (its edges' origins, the acknowledgements and

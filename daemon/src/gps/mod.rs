@@ -228,20 +228,27 @@ pub struct GpsFix {
 }
 
 impl GpsFix {
-    /// `fix` taken at keyframe index `keyframe`, in `frame`'s ENU; checked
-    /// as the wire checks it.
-    pub fn from_input(fix: &FixInput, keyframe: usize, frame: &LocalFrame) -> Result<GpsFix, GpsError> {
+    /// `fix`'s position, the whole fix checked as the wire checks it
+    /// ([`FixInput::check`]).
+    pub fn checked_position(fix: &FixInput) -> Result<Geodetic, GpsError> {
         let p = fix.position;
         let position = Geodetic::new(p.lat, p.lon, p.height)?;
         fix.check()?;
-        let (e, n, u) = frame.to_enu(&position);
-        Ok(GpsFix {
+        Ok(position)
+    }
+
+    /// `fix`, at `position` ([`Self::checked_position`]), taken at keyframe
+    /// index `keyframe`, in `frame`'s ENU.
+    pub fn at(fix: &FixInput, position: &Geodetic, keyframe: usize, frame: &LocalFrame) -> GpsFix {
+        let (e, n, u) = frame.to_enu(position);
+        let c = fix.covariance;
+        GpsFix {
             keyframe,
             enu: c64::new(e, n),
-            covariance: covariance(fix.covariance)?,
+            covariance: Matrix2::new(c[0], c[1], c[2], c[3]),
             up: u,
             up_variance: fix.height_variance.unwrap_or(0.0),
-        })
+        }
     }
 
     /// Mean variance per axis, `tr Σ / 2` (the σ² of paper A's equations).

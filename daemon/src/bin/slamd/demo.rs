@@ -113,9 +113,6 @@ pub fn run(opts: DemoOpts) -> anyhow::Result<()> {
         seed: opts.seed,
         ..Default::default()
     };
-    let truth_of = |graph: &PoseGraph<_>, truth| -> HashMap<KeyframeId, _> {
-        graph.keyframes().iter().map(|k| k.id).zip(truth).collect()
-    };
     match (&opts.dataset, opts.three_d) {
         (Some(path), _) => match slamd::io::read_any_graph_with(path, OnInvalid::Refuse)?.0 {
             AnyGraph::Planar(g) => show(&opts, &file_name(path), &g, None),
@@ -123,13 +120,13 @@ pub fn run(opts: DemoOpts) -> anyhow::Result<()> {
         },
         (None, false) => {
             let w = generate(&params);
-            let truth = truth_of(&w.graph, w.truth);
+            let truth = by_id(&w.graph, w.truth);
             let name = format!("synthetic world (seed {})", opts.seed);
             show(&opts, &name, &w.graph, Some(&truth))
         }
         (None, true) => {
             let w = generate3(&params, opts.storeys);
-            let truth = w.graph.keyframes().iter().map(|k| k.id).zip(w.truth).collect();
+            let truth = by_id(&w.graph, w.truth);
             let name = format!(
                 "synthetic building, {} storeys (seed {})",
                 opts.storeys, opts.seed
@@ -137,6 +134,11 @@ pub fn run(opts: DemoOpts) -> anyhow::Result<()> {
             show(&opts, &name, &w.graph, Some(&truth))
         }
     }
+}
+
+/// `poses`, one per keyframe of `graph`, by keyframe id.
+fn by_id<P: DemoPose>(graph: &PoseGraph<P>, poses: Vec<P>) -> HashMap<KeyframeId, P> {
+    graph.keyframes().iter().map(|k| k.id).zip(poses).collect()
 }
 
 /// Streams `graph` through a daemon of its dimension, prints latency and
@@ -205,23 +207,11 @@ fn show<P: DemoPose>(
         aligned_onto(&t, &estimate)
     });
     let odometry = top(&odometry);
-    let mut layers = vec![svg::Layer {
-        label: "slamd",
-        poses: &estimate,
-        color: svg::ESTIMATE,
-    }];
-    if let Some(t) = &truth_poses {
-        layers.push(svg::Layer {
-            label: "ground truth",
-            poses: t,
-            color: svg::TRUTH,
-        });
-    }
-    layers.push(svg::Layer {
-        label: "odometry only",
-        poses: &odometry,
-        color: svg::GUESS,
-    });
+    let layers = crate::solve::layers(
+        ("slamd", &estimate),
+        truth_poses.as_deref(),
+        ("odometry only", &odometry),
+    );
     let title = match P::DIMENSION {
         3 => format!("{name}, top view"),
         _ => name.to_string(),

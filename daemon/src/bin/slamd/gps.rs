@@ -59,7 +59,8 @@ pub fn load(opts: &GpsOpts, graph: &PoseGraph) -> anyhow::Result<Option<LoadedGp
             covariance: cov,
             height_variance: None,
         };
-        fixes.push(GpsFix::from_input(&input, k, &frame)?);
+        let position = GpsFix::checked_position(&input)?;
+        fixes.push(GpsFix::at(&input, &position, k, &frame));
         wire.push(input);
         if let Some([te, tn]) = r.truth {
             truth.push((k, c64::new(te, tn)));

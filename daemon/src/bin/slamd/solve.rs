@@ -149,8 +149,18 @@ pub fn plot_layers<'a>(
     truth: Option<&'a [Pose2]>,
     guess: &'a [Pose2],
 ) -> Vec<svg::Layer<'a>> {
+    layers(("estimate", estimate), truth, ("initial guess", guess))
+}
+
+/// An estimate, the ground truth aligned onto it when given, and where it
+/// started from, each with its label.
+pub fn layers<'a>(
+    (label, estimate): (&'static str, &'a [Pose2]),
+    truth: Option<&'a [Pose2]>,
+    (start, guess): (&'static str, &'a [Pose2]),
+) -> Vec<svg::Layer<'a>> {
     let mut layers = vec![svg::Layer {
-        label: "estimate",
+        label,
         poses: estimate,
         color: svg::ESTIMATE,
     }];
@@ -162,7 +172,7 @@ pub fn plot_layers<'a>(
         });
     }
     layers.push(svg::Layer {
-        label: "initial guess",
+        label: start,
         poses: guess,
         color: svg::GUESS,
     });

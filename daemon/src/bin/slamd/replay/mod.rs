@@ -249,23 +249,8 @@ pub fn run(opts: ReplayOpts) -> anyhow::Result<()> {
         .as_deref()
         .map(io::read_ground_truth)
         .transpose()?;
-    let checkpoints: Vec<usize> = (1..=opts.check_prefixes)
-        .map(|i| (i * graph.len() / (opts.check_prefixes + 1)).max(1))
-        .collect();
-    let mut sink: Box<dyn Sink> = if opts.embedded {
-        Box::new(EmbeddedSink(Engine::new(engine_config(&opts, &config))))
-    } else {
-        if opts.rate.is_some_and(|r| r.is_nan() || r <= 0.0) {
-            bail!("--rate must be > 0");
-        }
-        Box::new(DaemonSink::connect(
-            &config.namespace,
-            &config,
-            Duration::from_secs_f64(opts.timeout),
-            opts.rate,
-            2,
-        )?)
-    };
+    let checkpoints = checkpoints(&opts, graph.len());
+    let mut sink = sink::<Pose2>(&opts, &config)?;
     let gps = crate::gps::load(&opts.gps, &graph)?;
     let fixes = gps.as_ref().map_or(&[][..], |g| &g.wire[..]);
     let out = replay(
@@ -322,6 +307,30 @@ pub fn run(opts: ReplayOpts) -> anyhow::Result<()> {
         });
     }
     Ok(())
+}
+
+/// The keyframe counts after which `--check-prefixes` samples a snapshot.
+fn checkpoints(opts: &ReplayOpts, keyframes: usize) -> Vec<usize> {
+    (1..=opts.check_prefixes)
+        .map(|i| (i * keyframes / (opts.check_prefixes + 1)).max(1))
+        .collect()
+}
+
+/// Where the replay of poses `P` goes: the engine in this process
+/// (`--embedded`) or the daemon of the configured namespace, which must
+/// serve `P`'s dimension.
+fn sink<P: ReplayPose>(opts: &ReplayOpts, config: &Config) -> anyhow::Result<Box<dyn Sink<P>>> {
+    if opts.embedded {
+        return Ok(Box::new(EmbeddedSink(Engine::<P>::create(engine_config(
+            opts, config,
+        )))));
+    }
+    if opts.rate.is_some_and(|r| r.is_nan() || r <= 0.0) {
+        bail!("--rate must be > 0");
+    }
+    let timeout = Duration::from_secs_f64(opts.timeout);
+    let daemon = DaemonSink::connect(&config.namespace, config, timeout, opts.rate, P::DIMENSION)?;
+    Ok(Box::new(daemon))
 }
 
 pub fn engine_config(opts: &ReplayOpts, config: &Config) -> EngineConfig {

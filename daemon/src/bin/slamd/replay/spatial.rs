@@ -2,14 +2,12 @@
 //! daemon serving 3-D graphs, the same stream, latency and prefix checks
 //! as in 2-D.
 
-use super::{replay, DaemonSink, EmbeddedSink, ReplayOpts, Report, Sink};
+use super::{replay, ReplayOpts, Report};
 use anyhow::bail;
 use slamd::config::Config;
-use slamd::engine::Engine;
 use slamd::graph::{Pose3, PoseGraph};
 use slamd::io;
 use slamd::solver::{solve_batch3, BatchOptions};
-use std::time::Duration;
 
 pub fn run(
     opts: &ReplayOpts,
@@ -26,22 +24,9 @@ pub fn run(
         .as_deref()
         .map(io::read_ground_truth3)
         .transpose()?;
-    let checkpoints: Vec<usize> = (1..=opts.check_prefixes)
-        .map(|i| (i * graph.len() / (opts.check_prefixes + 1)).max(1))
-        .collect();
-    let (mut embedded, mut daemon);
-    let sink: &mut dyn Sink<Pose3> = if opts.embedded {
-        embedded = EmbeddedSink(Engine::<Pose3>::create(super::engine_config(opts, config)));
-        &mut embedded
-    } else {
-        if opts.rate.is_some_and(|r| r.is_nan() || r <= 0.0) {
-            bail!("--rate must be > 0");
-        }
-        let timeout = Duration::from_secs_f64(opts.timeout);
-        daemon = DaemonSink::connect(&config.namespace, config, timeout, opts.rate, 3)?;
-        &mut daemon
-    };
-    let out = replay(&graph, &[], sink, &checkpoints, false, |_| {})?;
+    let checkpoints = super::checkpoints(opts, graph.len());
+    let mut sink = super::sink::<Pose3>(opts, config)?;
+    let out = replay(&graph, &[], sink.as_mut(), &checkpoints, false, |_| {})?;
     if let Some(path) = &opts.out {
         let mut w = std::io::BufWriter::new(std::fs::File::create(path)?);
         match io::Trajectory::of(path) {
