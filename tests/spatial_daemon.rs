@@ -74,6 +74,10 @@ fn a_building_streams_through_a_3d_daemon_and_survives_a_restart() {
     let daemon = Daemon::serve(&namespace, &args, &env);
     let snaps = Snapshots::open(&namespace).unwrap();
     let mut f = Frontend::connect(&daemon.config()).unwrap();
+    // as a frontend that waits for each keyframe's snapshot: one keyframe
+    // per batch, whatever the machine's load (a burst arrives in batches
+    // whose sizes the load decides, and the filter may then hold true
+    // loop closures off)
     let mut seq = 0;
     for (k, group) in g.by_newer().into_iter().enumerate() {
         seq = f.add_keyframe3(g.id_of(k), 0, None).unwrap();
@@ -81,6 +85,7 @@ fn a_building_streams_through_a_3d_daemon_and_survives_a_restart() {
             seq = f.add_edge3(&g.edge_input(e)).unwrap();
         }
         f.flush().unwrap();
+        wait_until(&snaps, f.id(), seq, |_, _| true);
     }
     // at rest the daemon re-solves in the background to the optimum of
     // every edge (the header's χ² leaves out what the filter holds off)
