@@ -9,6 +9,7 @@ mod fuzz;
 mod gps;
 mod gps3;
 mod incremental;
+mod marginals;
 mod outliers;
 mod restore;
 mod spatial;

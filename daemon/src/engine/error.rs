@@ -27,6 +27,10 @@ pub enum EngineError {
     Restore(String),
     /// Something this dimension's engine does not do.
     Unsupported(&'static str),
+    /// A marginal covariance that cannot be read: the keyframe has no edge
+    /// to the map yet, the graph leaves it a free direction, or no
+    /// Gauss–Newton system is kept.
+    NoCovariance(KeyframeId, &'static str),
 }
 
 impl fmt::Display for EngineError {
@@ -41,6 +45,7 @@ impl fmt::Display for EngineError {
             EngineError::FixKeyframe(id) => write!(f, "GPS fix for unknown keyframe {id}"),
             EngineError::Restore(e) => write!(f, "cannot restore the map: {e}"),
             EngineError::Unsupported(what) => f.write_str(what),
+            EngineError::NoCovariance(id, why) => write!(f, "no covariance for keyframe {id}: {why}"),
         }
     }
 }

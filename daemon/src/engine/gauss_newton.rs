@@ -28,6 +28,7 @@ use crate::nonlinear::structure::{HessianStructure, NONE};
 use crate::nonlinear::{PositionPrior, Problem};
 use crate::sparse::dynamic::{AugmentedCholesky, DynamicLdlt, Marginal, UpdateError, MAX_RANK};
 use crate::sparse::FactorError;
+use nalgebra::DMatrix;
 
 /// The linearised system and the estimate it gives.
 #[derive(Clone, Debug)]
@@ -45,6 +46,8 @@ pub struct GaussNewton<P: EnginePose = Pose2> {
     /// Update vectors (with their tails) waiting for one walk.
     batch: Vec<(Vec<(usize, f64)>, f64)>,
     marginal: Marginal,
+    /// Scratch for [`Self::covariance`]: two poses of `DOF` ≤ 6.
+    pose_marginal: Marginal<12>,
 }
 
 impl<P: EnginePose> GaussNewton<P> {
@@ -61,6 +64,7 @@ impl<P: EnginePose> GaussNewton<P> {
             epoch: 0,
             batch: Vec::new(),
             marginal: Marginal::default(),
+            pose_marginal: Marginal::default(),
         }
     }
 
@@ -115,6 +119,7 @@ impl<P: EnginePose> GaussNewton<P> {
             epoch: 0,
             batch: Vec::new(),
             marginal: Marginal::default(),
+            pose_marginal: Marginal::default(),
         };
         for k in order {
             gn.refresh_estimate(*k);
@@ -221,6 +226,64 @@ impl<P: EnginePose> GaussNewton<P> {
             return Ok(None);
         };
         Ok(P::innovation_chi2(&edge.information, e, &jsj, variance_factor))
+    }
+
+    /// The joint covariance `M Σ Mᵀ` of one or two `keyframes`, `DOF`
+    /// rows each in their order: `Σ = H⁻¹` restricted to their columns
+    /// (`Vᵀ H⁻¹ V` with `V` the columns' unit vectors, read off the
+    /// elimination-tree paths by [`Marginal`], no inverse formed), in the
+    /// body-frame tangent `M` ([`LiePose::body_tangent`](crate::nonlinear::LiePose::body_tangent))
+    /// at `lin`. The gauge has zero rows (it is held fixed). Applies the
+    /// waiting updates first. `None` when a keyframe has no columns or no
+    /// weight (an infinite variance).
+    pub fn covariance(&mut self, keyframes: &[usize]) -> Result<Option<DMatrix<f64>>, UpdateError> {
+        assert!(keyframes.len() <= 2, "one or two keyframes");
+        self.flush()?;
+        let dof = P::DOF;
+        let mut vectors = Vec::new();
+        let mut slot = Vec::new();
+        for (b, &k) in keyframes.iter().enumerate() {
+            match self.column.get(k) {
+                Some(&c) if c != NONE => {
+                    for a in 0..dof {
+                        vectors.push([(c as usize + a, 1.0)]);
+                        slot.push(b * dof + a);
+                    }
+                }
+                _ if k == 0 => {}
+                _ => return Ok(None),
+            }
+        }
+        let m = dof * keyframes.len();
+        let mut sigma = DMatrix::zeros(m, m);
+        if !vectors.is_empty() {
+            let slices: Vec<&[(usize, f64)]> = vectors.iter().map(|v| &v[..]).collect();
+            let factor = self.chol.factor();
+            // one pose fits the narrower scratch, whose rows are half as long
+            let form = if slices.len() <= 6 {
+                self.marginal.form(factor, &slices).map(|f| f.resize_generic(nalgebra::Const::<12>, nalgebra::Const::<12>, 0.0))
+            } else {
+                self.pose_marginal.form(factor, &slices)
+            };
+            let Some(form) = form else {
+                return Ok(None);
+            };
+            for (r, &a) in slot.iter().enumerate() {
+                for (s, &b) in slot.iter().enumerate() {
+                    sigma[(a, b)] = form[(r, s)];
+                }
+            }
+        }
+        let mut tangent = DMatrix::zeros(m, m);
+        for (b, &k) in keyframes.iter().enumerate() {
+            let t = self.lin[k].body_tangent();
+            for r in 0..dof {
+                for s in 0..dof {
+                    tangent[(b * dof + r, b * dof + s)] = t[(r, s)];
+                }
+            }
+        }
+        Ok(Some(&tangent * sigma * tangent.transpose()))
     }
 
     /// Batches update vectors (`sigma > 0`), or applies a downdate now

@@ -58,6 +58,7 @@ mod config;
 mod error;
 pub mod gauss_newton;
 pub mod linear_stages;
+mod marginals;
 mod model;
 mod op;
 pub mod pose;

@@ -34,6 +34,11 @@ pub struct State<P: EnginePose = Pose2> {
 }
 
 impl<P: EnginePose> State<P> {
+    /// The Gauss–Newton system, when kept.
+    pub(super) fn gauss_newton(&mut self) -> Option<&mut super::gauss_newton::GaussNewton<P>> {
+        self.solvers.gauss_newton()
+    }
+
     /// An empty state with the solvers `config` selects.
     pub fn new(config: &EngineConfig) -> Self {
         Self::assemble(config, Model::default(), Solvers::new(config), Vec::new())

@@ -35,6 +35,12 @@ pub trait LiePose: EdgeCost {
     /// `self ⊞ δ`, with `delta` of length `DOF`.
     fn retract(&self, delta: &[f64]) -> Self;
 
+    /// `M` with `ξ = M δ` to first order, where `self ⊞ δ = self · Exp(ξ)`:
+    /// `ξ` is the translation in the pose's own frame, then the rotation
+    /// (rad; a rotation vector in space), GTSAM's tangent. A covariance
+    /// `Σ` over `δ` is `M Σ Mᵀ` over `ξ`.
+    fn body_tangent(&self) -> Self::PoseHessian;
+
     /// `(p − target)ᵀ Ω (p − target)` of the pose's position `p`.
     fn prior_chi2(&self, target: &Self::Position, information: &Self::PositionInformation) -> f64;
 
@@ -64,6 +70,12 @@ impl LiePose for Pose2 {
 
     fn retract(&self, d: &[f64]) -> Pose2 {
         Pose2::new(self.x + d[0], self.y + d[1], self.theta + d[2])
+    }
+
+    /// `δ` moves the position in the map frame: `ξ_t = Rᵀ δ_t`, `ξ_θ = δ_θ`.
+    fn body_tangent(&self) -> Matrix3<f64> {
+        let (s, c) = self.theta.sin_cos();
+        Matrix3::new(c, s, 0.0, -s, c, 0.0, 0.0, 0.0, 1.0)
     }
 
     fn prior_chi2(&self, target: &c64, information: &Matrix2<f64>) -> f64 {
@@ -102,6 +114,12 @@ impl LiePose for Pose3 {
 
     fn retract(&self, d: &[f64]) -> Pose3 {
         se3::retract(self, &Vector6::from_column_slice(d))
+    }
+
+    /// `⊞` already moves the position in the pose's frame (`ξ_t = u`); its
+    /// rotation part `v` is half the rotation vector (`ξ_r = 2v`).
+    fn body_tangent(&self) -> Matrix6<f64> {
+        Matrix6::from_diagonal(&Vector6::new(1.0, 1.0, 1.0, 2.0, 2.0, 2.0))
     }
 
     fn prior_chi2(&self, target: &Vector3<f64>, information: &Matrix3<f64>) -> f64 {

@@ -126,6 +126,38 @@ impl<P: RigidMotion> Default for MapFile<P> {
 }
 
 impl<P: RigidMotion> MapFile<P> {
+    /// The map of `graph` solved at `poses` (one per keyframe, in order):
+    /// every keyframe joined and linearised at its pose, every edge at
+    /// weight 1 and switched on. [`Engine::restore`](crate::engine::Engine::restore)
+    /// of it factorises the graph at `poses` (for their covariances).
+    pub fn solved(graph: &PoseGraph<P>, poses: &[P]) -> Self {
+        let keyframes = graph
+            .keyframes()
+            .iter()
+            .zip(poses)
+            .map(|(k, &pose)| MapKeyframe {
+                id: k.id,
+                guess: k.guess,
+                estimate: pose,
+                lin: pose,
+                joined: true,
+            })
+            .collect();
+        let edges = (0..graph.edges().len())
+            .map(|e| MapEdge {
+                edge: graph.edge_input(e),
+                scale: 1.0,
+                switch: 1.0,
+                origin: Origin { frontend: 0, sequence: 0 },
+            })
+            .collect();
+        Self {
+            keyframes,
+            edges,
+            ..Self::default()
+        }
+    }
+
     /// The file's bytes.
     pub fn encode(&self) -> Vec<u8> {
         let mut p = Put::default();

@@ -1,4 +1,4 @@
-//! [`Marginal`]: `Vᵀ A⁻¹ V` for up to six sparse vectors, read off the
+//! [`Marginal`]: `Vᵀ A⁻¹ V` for up to `N` sparse vectors, read off the
 //! factor.
 //!
 //! With `A = L D Lᵀ`, `Vᵀ A⁻¹ V = Yᵀ D⁻¹ Y` where `Y = L⁻¹ V`. The pattern
@@ -6,34 +6,42 @@
 //! `V` to the root (the rows of a column are its ancestors), so the forward
 //! solve runs over those columns only, in ascending order: the cost of one
 //! update's walk, with nothing written to the factor. The engine uses it
-//! for the covariance `J Σ Jᵀ` of an edge's predicted error (`Σ = H⁻¹`).
+//! for the covariance `J Σ Jᵀ` of an edge's predicted error (`Σ = H⁻¹`,
+//! `N` = 6) and for the marginal covariance of one or two poses (`V` their
+//! unit vectors, `N` = 12).
 
 use super::DynamicLdlt;
-use nalgebra::Matrix6;
-
-/// Most vectors one [`Marginal::form`] takes: a 3-D pose's degrees of
-/// freedom.
-pub const MAX_VECTORS: usize = 6;
+use nalgebra::SMatrix;
 
 /// Scratch for [`Marginal::form`], kept between calls (dense per column,
-/// zero outside a call).
-#[derive(Clone, Debug, Default)]
-pub struct Marginal {
-    y: Vec<[f64; MAX_VECTORS]>,
+/// zero outside a call), for up to `N` vectors.
+#[derive(Clone, Debug)]
+pub struct Marginal<const N: usize = 6> {
+    y: Vec<[f64; N]>,
     on_path: Vec<bool>,
     path: Vec<usize>,
 }
 
-impl Marginal {
+impl<const N: usize> Default for Marginal<N> {
+    fn default() -> Self {
+        Self {
+            y: Vec::new(),
+            on_path: Vec::new(),
+            path: Vec::new(),
+        }
+    }
+}
+
+impl<const N: usize> Marginal<N> {
     /// `Vᵀ A⁻¹ V`, where `v[r]` lists the nonzeros `(column, value)` of
-    /// vector `r` (at most `MAX_VECTORS`, six); the result fills the top-left
-    /// `v.len()` square. `None` when a pivot on the path is zero while `Y`
-    /// is not (a variable with no weight: infinite variance).
-    pub fn form(&mut self, factor: &DynamicLdlt<f64>, v: &[&[(usize, f64)]]) -> Option<Matrix6<f64>> {
-        assert!(v.len() <= MAX_VECTORS, "at most {MAX_VECTORS} vectors");
+    /// vector `r` (at most `N`); the result fills the top-left `v.len()`
+    /// square. `None` when a pivot on the path is zero while `Y` is not (a
+    /// variable with no weight: infinite variance).
+    pub fn form(&mut self, factor: &DynamicLdlt<f64>, v: &[&[(usize, f64)]]) -> Option<SMatrix<f64, N, N>> {
+        assert!(v.len() <= N, "at most {N} vectors");
         let (n, m) = (factor.len(), v.len());
         if self.y.len() < n {
-            self.y.resize(n, [0.0; MAX_VECTORS]);
+            self.y.resize(n, [0.0; N]);
             self.on_path.resize(n, false);
         }
         self.path.clear();
@@ -49,7 +57,7 @@ impl Marginal {
             }
         }
         self.path.sort_unstable();
-        let mut form = Some(Matrix6::zeros());
+        let mut form = Some(SMatrix::<f64, N, N>::zeros());
         for &j in &self.path {
             let y = self.y[j];
             if y[..m].iter().all(|&v| v == 0.0) {
@@ -77,7 +85,7 @@ impl Marginal {
         }
         // every row written is an ancestor of a path column, so on the path
         for &j in &self.path {
-            self.y[j] = [0.0; MAX_VECTORS];
+            self.y[j] = [0.0; N];
             self.on_path[j] = false;
         }
         form

@@ -234,7 +234,7 @@ proptest! {
             }
         }
         let slices: Vec<&[(usize, f64)]> = vectors.iter().map(|v| &v[..]).collect();
-        let got = Marginal::default().form(&f, &slices).unwrap();
+        let got = Marginal::<6>::default().form(&f, &slices).unwrap();
         let want = dense_v.adjoint() * dense.try_inverse().unwrap() * &dense_v;
         for r in 0..m {
             for s in 0..m {
