@@ -1,6 +1,7 @@
 //! The `slamd` command: run the daemon, solve or replay a graph, demo.
 
 mod cli;
+mod covariances;
 mod demo;
 mod eval;
 mod export;

@@ -33,6 +33,11 @@ pub struct SolveOpts {
     /// Draw the estimate over the ground truth and the initial guess.
     #[arg(long)]
     pub plot: Option<PathBuf>,
+    /// Write every keyframe's marginal covariance at the result: its id,
+    /// then the upper triangle row by row over `x y theta` (in 3-D
+    /// `x y z rx ry rz`), in the pose's own frame, the first keyframe fixed.
+    #[arg(long)]
+    pub covariances: Option<PathBuf>,
     /// Drop every loop closure: odometry alone (with --gps: odometry and GPS).
     #[arg(long)]
     pub odometry_only: bool,
@@ -79,6 +84,14 @@ pub fn run(opts: SolveOpts) -> anyhow::Result<()> {
     if let Some(out) = &opts.out {
         write_result(out, &graph, &sol.poses)?;
     }
+    if opts.covariances.is_some() && gps.is_some() {
+        anyhow::bail!("--covariances does not take GPS fixes in; leave out --gps");
+    }
+    let covariance_seconds = opts
+        .covariances
+        .as_deref()
+        .map(|path| crate::covariances::write(path, &graph, &sol.poses, sol.switches.as_deref()))
+        .transpose()?;
     if let Some(plot) = &opts.plot {
         let guess = graph.initial_guess()?;
         let truth_poses: Option<Vec<_>> = truth.as_ref().map(|t| {
@@ -116,6 +129,8 @@ pub fn run(opts: SolveOpts) -> anyhow::Result<()> {
             "gps_fixes": gps.as_ref().map(|g| g.input.fixes.len()),
             "georeferenced": sol.georef.is_some(),
             "enu_rmse": enu_rmse,
+            "covariance_seconds": covariance_seconds.map(|c| c.0),
+            "covariance_max_seconds": covariance_seconds.map(|c| c.1),
         });
         println!(
             "{}",

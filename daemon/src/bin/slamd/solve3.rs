@@ -44,12 +44,21 @@ pub fn run(opts: &SolveOpts, graph: &PoseGraph<Pose3>, skipped: serde_json::Valu
             }
         }
     }
+    let covariance_seconds = opts
+        .covariances
+        .as_deref()
+        .map(|path| crate::covariances::write(path, graph, &sol.poses, sol.switches.as_deref()))
+        .transpose()?;
     if let Some(plot) = &opts.plot {
         plot_top_view(plot, opts, graph, &sol.poses, truth.as_ref())?;
     }
     let robust = crate::robust::Rejected::of(graph, sol.switches.as_deref());
     if opts.json {
-        let extra = serde_json::json!({ "dimension": "3d" });
+        let extra = serde_json::json!({
+            "dimension": "3d",
+            "covariance_seconds": covariance_seconds.map(|c| c.0),
+            "covariance_max_seconds": covariance_seconds.map(|c| c.1),
+        });
         println!(
             "{}",
             summary_json(opts, graph, &sol, ate, &robust, skipped, extra)
