@@ -11,6 +11,7 @@ use crate::service::Qos;
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
+use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
 use iceoryx2::waitset::WaitSetRunResult;
@@ -297,8 +298,13 @@ impl Outlet {
     }
 
     /// Publishes the daemon's status with its acknowledgements (before the
-    /// snapshot that carries the same).
+    /// snapshot that carries the same). A snapshot or switches subscriber
+    /// that arrived since the last publish gets the latest one now (the
+    /// topics' history), so one that subscribes to a daemon at rest need
+    /// not wait for new input.
     pub fn publish_status(&self, m: DaemonStatus) -> Result<(), TransportError> {
+        let _ = self.poses.update_connections();
+        let _ = self.switches.update_connections();
         self.status
             .send_copy(m)
             .map(|_| ())
