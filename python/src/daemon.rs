@@ -1,0 +1,190 @@
+//! `slamd.Frontend` and `slamd.Snapshots`: a running daemon, over shared
+//! memory.
+
+use crate::convert::{self, ids, rows, PyPose};
+use crate::engine::Snapshot;
+use crate::error;
+use pyo3::prelude::*;
+use slamd::engine::{EdgeInput, FixInput};
+use slamd::geometry::Pose2;
+use slamd::gps::Geodetic;
+use slamd::graph::{Pose3, RigidMotion};
+use slamd_protocol::transport::SnapshotLink;
+use slamd_protocol::{Endpoint, Frontend as Link};
+use std::time::Duration;
+
+/// A frontend publishing to the daemon of `namespace` (the daemon's
+/// `SLAMD_NAMESPACE`, default "slamd"), in `dimension` 2 or 3 (the
+/// daemon's own). Messages are numbered; the daemon acknowledges them in
+/// its snapshots, and what it has not acknowledged is sent again when a
+/// new daemon instance takes over the namespace.
+#[pyclass(module = "slamd", unsendable)]
+pub struct Frontend {
+    link: Link,
+    dimension: u32,
+}
+
+fn publish_edge<P: RigidMotion + PyPose>(
+    link: &mut Link,
+    from: u64,
+    to: u64,
+    measurement: &Bound<'_, PyAny>,
+    information: &Bound<'_, PyAny>,
+    kind: Option<&str>,
+) -> PyResult<u64> {
+    let edge = EdgeInput::new(
+        from,
+        to,
+        convert::pose::<P>(measurement)?,
+        convert::information::<P>(information)?,
+        convert::kind(kind, from, to)?,
+    );
+    link.publish_edge(&edge).map_err(error)
+}
+
+#[pymethods]
+impl Frontend {
+    #[new]
+    #[pyo3(signature = (namespace = "slamd", dimension = 2))]
+    fn new(namespace: &str, dimension: u32) -> PyResult<Self> {
+        if !(2..=3).contains(&dimension) {
+            return Err(error(format!("dimension {dimension}: 2 or 3")));
+        }
+        let link = Link::connect(Endpoint::new(namespace)).map_err(error)?;
+        Ok(Self { link, dimension })
+    }
+
+    /// This frontend's id in the daemon's acknowledgements.
+    #[getter]
+    fn id(&self) -> u32 {
+        self.link.id()
+    }
+
+    /// The number of the last message sent.
+    #[getter]
+    fn last_sequence(&self) -> u64 {
+        self.link.last_sequence()
+    }
+
+    /// Publishes a keyframe, with an optional initial pose and its time
+    /// (ns, the frontend's clock). Returns its message number.
+    #[pyo3(signature = (id, guess = None, timestamp_ns = 0))]
+    fn add_keyframe(&mut self, id: u64, guess: Option<&Bound<'_, PyAny>>, timestamp_ns: u64) -> PyResult<u64> {
+        if self.dimension == 2 {
+            let guess = guess.map(convert::pose::<Pose2>).transpose()?;
+            self.link.publish_keyframe(id, timestamp_ns, guess)
+        } else {
+            let guess = guess.map(convert::pose::<Pose3>).transpose()?;
+            self.link.publish_keyframe(id, timestamp_ns, guess)
+        }
+        .map_err(error)
+    }
+
+    /// Publishes an edge, as `Engine.add_edge` takes it. Returns its
+    /// message number.
+    #[pyo3(signature = (from_id, to_id, measurement, information, kind = None))]
+    fn add_edge(
+        &mut self,
+        from_id: u64,
+        to_id: u64,
+        measurement: &Bound<'_, PyAny>,
+        information: &Bound<'_, PyAny>,
+        kind: Option<&str>,
+    ) -> PyResult<u64> {
+        if self.dimension == 2 {
+            publish_edge::<Pose2>(&mut self.link, from_id, to_id, measurement, information, kind)
+        } else {
+            publish_edge::<Pose3>(&mut self.link, from_id, to_id, measurement, information, kind)
+        }
+    }
+
+    /// Publishes a GPS fix, as `Engine.add_gps` takes it.
+    #[pyo3(signature = (keyframe, lat, lon, height = 0.0, covariance = [1.0, 0.0, 0.0, 1.0], height_variance = None))]
+    fn add_gps(
+        &mut self,
+        keyframe: u64,
+        lat: f64,
+        lon: f64,
+        height: f64,
+        covariance: [f64; 4],
+        height_variance: Option<f64>,
+    ) -> PyResult<u64> {
+        let fix = FixInput {
+            keyframe,
+            position: Geodetic::new(lat, lon, height).map_err(error)?,
+            covariance,
+            height_variance,
+        };
+        self.link.add_gps(&fix).map_err(error)
+    }
+
+    /// Wakes the daemon for what was published.
+    fn flush(&mut self) -> PyResult<()> {
+        self.link.flush().map_err(error)
+    }
+
+    /// Waits up to `timeout` seconds until the daemon has acknowledged
+    /// message `sequence` (default: the last one sent); False on timeout.
+    #[pyo3(signature = (sequence = None, timeout = 10.0))]
+    fn wait_acknowledged(&mut self, py: Python<'_>, sequence: Option<u64>, timeout: f64) -> PyResult<bool> {
+        let sequence = sequence.unwrap_or(self.link.last_sequence());
+        let wait = Duration::try_from_secs_f64(timeout).map_err(error)?;
+        let _ = py;
+        self.link.wait_acknowledged(sequence, wait).map_err(error)
+    }
+}
+
+/// The daemon's pose snapshots of `namespace`.
+#[pyclass(module = "slamd", unsendable)]
+pub struct Snapshots {
+    link: SnapshotLink,
+}
+
+fn daemon_snapshot(py: Python<'_>, s: &slamd_protocol::transport::SnapshotSample) -> PyResult<Snapshot> {
+    let h = s.header();
+    let poses = s.poses();
+    let (width, flat): (usize, Vec<f64>) = if h.dimension == 3 {
+        (7, poses.iter().flat_map(|p| [p.x, p.y, p.z, p.qx, p.qy, p.qz, p.qw]).collect())
+    } else {
+        (3, poses.iter().flat_map(|p| [p.x, p.y, p.theta]).collect())
+    };
+    Ok(Snapshot {
+        version: h.version,
+        chi2: h.chi2,
+        resolves: h.resolves,
+        keyframes: h.keyframes,
+        edges: h.edges,
+        ids: ids(py, poses.iter().map(|p| p.id).collect()).unbind(),
+        poses: rows(py, width, flat)?.unbind(),
+    })
+}
+
+#[pymethods]
+impl Snapshots {
+    #[new]
+    #[pyo3(signature = (namespace = "slamd"))]
+    fn new(namespace: &str) -> PyResult<Self> {
+        Ok(Self {
+            link: SnapshotLink::open(namespace).map_err(error)?,
+        })
+    }
+
+    /// The newest snapshot delivered since the last call, or None.
+    fn latest(&self, py: Python<'_>) -> PyResult<Option<Snapshot>> {
+        match self.link.latest().map_err(error)? {
+            Some(s) => daemon_snapshot(py, &s).map(Some),
+            None => Ok(None),
+        }
+    }
+
+    /// Waits up to `timeout` seconds for a snapshot newer than the last one
+    /// taken; None on timeout.
+    #[pyo3(signature = (timeout = 5.0))]
+    fn wait(&self, py: Python<'_>, timeout: f64) -> PyResult<Option<Snapshot>> {
+        let wait = Duration::try_from_secs_f64(timeout).map_err(error)?;
+        match self.link.wait(wait).map_err(error)? {
+            Some(s) => daemon_snapshot(py, &s).map(Some),
+            None => Ok(None),
+        }
+    }
+}
