@@ -1,0 +1,76 @@
+#!/usr/bin/env python3
+"""Streaming a graph into `slamd.Engine` from Python against the Rust
+embedded replay of the same graph, in one run.
+
+    cargo build --release --bin slamd
+    pip install ./python            # the release build of the package
+    python3 benches/python_engine.py [--files city10000.g2o] [--repeat 3]
+
+Both sides stream the same keyframes in the same order: keyframe k, then
+every edge whose newer end it is (file order), then one update; after the
+last keyframe, an inline re-solve over everything (`resolve_now`). Rust:
+`slamd replay FILE --embedded --json`, its `total_s`. Python: the same loop
+on `slamd.Engine()` (default settings, background re-solves), timed from
+the first keyframe to the closing re-solve; the edges are turned into
+Python lists before the clock starts, as replay builds its steps first.
+The runs alternate and each figure is the best of --repeat.
+"""
+import argparse, json, os, subprocess, time
+
+import slamd
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+DATA = os.environ.get("SLAMD_DATASETS") or os.path.normpath(os.path.join(HERE, "..", "..", "shared", "datasets"))
+SLAMD = os.environ.get("SLAMD_BIN") or os.path.join(HERE, "..", "target", "release", "slamd")
+
+
+def steps(graph):
+    """Per keyframe (file order): its id and the edges whose newer end it is."""
+    index = {int(k): i for i, k in enumerate(graph.ids)}
+    groups = [[] for _ in range(len(graph))]
+    ends, meas, info, kinds = graph.edges.tolist(), graph.measurements.tolist(), graph.information.tolist(), graph.kinds
+    for e, (a, b) in enumerate(ends):
+        groups[max(index[a], index[b])].append((a, b, meas[e], info[e], kinds[e]))
+    return list(zip(graph.ids.tolist(), groups))
+
+
+def python_stream(graph):
+    stream = steps(graph)
+    engine = slamd.Engine(graph.dimension)
+    start = time.perf_counter()
+    for kid, edges in stream:
+        engine.add_keyframe(kid)
+        for a, b, z, omega, kind in edges:
+            engine.add_edge(a, b, z, omega, kind)
+        engine.update()
+    engine.resolve_now()
+    seconds = time.perf_counter() - start
+    return seconds, engine.snapshot().chi2
+
+
+def rust_replay(path):
+    out = subprocess.run([SLAMD, "replay", path, "--embedded", "--json"], check=True, capture_output=True, text=True)
+    d = json.loads(out.stdout)
+    return d["total_s"], d["chi2"]
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--files", nargs="*", default=["city10000.g2o", "manhattanolson3500.g2o"])
+    ap.add_argument("--repeat", type=int, default=3)
+    args = ap.parse_args()
+    print("| file | Rust replay s | Python stream s | ratio | Rust χ² | Python χ² |")
+    print("|---|---|---|---|---|---|")
+    for name in args.files:
+        path = os.path.join(DATA, name)
+        graph = slamd.read(path)
+        rust, py = [], []
+        for _ in range(args.repeat):
+            rust.append(rust_replay(path))
+            py.append(python_stream(graph))
+        r, p = min(rust), min(py)
+        print(f"| {name} | {r[0]:.2f} | {p[0]:.2f} | {p[0] / r[0]:.2f} | {r[1]:.4f} | {p[1]:.4f} |", flush=True)
+
+
+if __name__ == "__main__":
+    main()
