@@ -14,6 +14,11 @@ on `slamd.Engine()` (default settings, background re-solves), timed from
 the first keyframe to the closing re-solve; the edges are turned into
 Python lists before the clock starts, as replay builds its steps first.
 The runs alternate and each figure is the best of --repeat.
+
+A second table gives what one marginal covariance costs on the engine the
+last Python stream left (the mean of 50 calls): of the newest keyframe (what
+a daemon puts in every snapshot header), one from the middle, and the first
+past the gauge.
 """
 import argparse, json, os, subprocess, time
 
@@ -45,7 +50,14 @@ def python_stream(graph):
         engine.update()
     engine.resolve_now()
     seconds = time.perf_counter() - start
-    return seconds, engine.snapshot().chi2
+    return seconds, engine.snapshot().chi2, engine
+
+
+def marginal_ms(engine, keyframe, calls=50):
+    start = time.perf_counter()
+    for _ in range(calls):
+        engine.marginal(keyframe)
+    return (time.perf_counter() - start) / calls * 1e3
 
 
 def rust_replay(path):
@@ -61,6 +73,7 @@ def main():
     args = ap.parse_args()
     print("| file | Rust replay s | Python stream s | ratio | Rust χ² | Python χ² |")
     print("|---|---|---|---|---|---|")
+    engines = []
     for name in args.files:
         path = os.path.join(DATA, name)
         graph = slamd.read(path)
@@ -68,8 +81,15 @@ def main():
         for _ in range(args.repeat):
             rust.append(rust_replay(path))
             py.append(python_stream(graph))
-        r, p = min(rust), min(py)
+        r, p = min(rust), min(py, key=lambda t: t[0])
         print(f"| {name} | {r[0]:.2f} | {p[0]:.2f} | {p[0] / r[0]:.2f} | {r[1]:.4f} | {p[1]:.4f} |", flush=True)
+        engines.append((name, graph.ids.tolist(), py[-1][2]))
+    print()
+    print("| file | newest keyframe ms | middle ms | first past the gauge ms |")
+    print("|---|---|---|---|")
+    for name, ids, engine in engines:
+        cells = [marginal_ms(engine, k) for k in (ids[-1], ids[len(ids) // 2], ids[1])]
+        print(f"| {name} | " + " | ".join(f"{c:.3f}" for c in cells) + " |", flush=True)
 
 
 if __name__ == "__main__":

@@ -3,7 +3,7 @@
 
 use slamd_client::{
     Config, EdgeInput, EdgeKind, Embedded, EngineConfig, Frontend, Information, Pose2, Publish,
-    RejectionReason, Snapshots,
+    RejectionReason, SnapshotSample, Snapshots,
 };
 use slamd_protocol::codec::{edge_out, Origin};
 use slamd_protocol::{Edge, PROTOCOL_VERSION};
@@ -81,16 +81,22 @@ fn wait_for_ack(
     frontend: u32,
     seq: u64,
 ) -> (HashMap<u64, Pose2>, slamd_protocol::SnapshotHeader) {
+    let snap = wait_for_sample(s, frontend, seq);
+    let poses = snap
+        .poses()
+        .iter()
+        .map(|p| (p.id, Pose2::new(p.x, p.y, p.theta)))
+        .collect();
+    (poses, *snap.header())
+}
+
+/// Waits for a snapshot acknowledging `seq` from `frontend`.
+fn wait_for_sample(s: &Snapshots, frontend: u32, seq: u64) -> SnapshotSample {
     let deadline = Instant::now() + Duration::from_secs(20);
     loop {
         if let Some(snap) = s.wait(Duration::from_millis(200)).expect("snapshot link") {
             if snap.header().ack_of(frontend).is_some_and(|a| a >= seq) {
-                let poses = snap
-                    .poses()
-                    .iter()
-                    .map(|p| (p.id, Pose2::new(p.x, p.y, p.theta)))
-                    .collect();
-                return (poses, *snap.header());
+                return snap;
             }
         }
         assert!(
@@ -401,27 +407,62 @@ fn daemon_snapshots_equal_the_embedded_engine() {
         ..Config::default()
     };
     let mut embedded = Embedded::new(&config);
-    let mut from_daemon = HashMap::new();
+    let stamp = |k: usize| 1_700_000_000_000_000_000 + 100_000_000 * k as u64;
+    let mut last = None;
     for (k, group) in groups.iter().enumerate() {
+        // every other keyframe carries its time
+        let t = if k.is_multiple_of(2) { stamp(k) } else { 0 };
         for side in [&mut f as &mut dyn Publish, &mut embedded as &mut dyn Publish] {
-            side.add_keyframe(graph.id_of(k), 0, None).unwrap();
+            side.add_keyframe(graph.id_of(k), t, None).unwrap();
             for &e in group {
                 side.add_edge(&graph.edge_input(e)).unwrap();
             }
             side.flush().unwrap();
         }
         // lockstep: one batch, one update per keyframe on both sides
-        from_daemon = wait_for_ack(&snaps, f.id(), f.last_sequence()).0;
+        last = Some(wait_for_sample(&snaps, f.id(), f.last_sequence()));
     }
+    let last = last.expect("a snapshot");
     let snap = embedded.snapshot();
-    assert_eq!(from_daemon.len(), snap.len());
-    for (id, p) in snap.poses() {
+    assert_eq!(last.poses().len(), snap.len());
+    let from_daemon: HashMap<u64, &slamd_client::Pose> = last.poses().iter().map(|p| (p.id, p)).collect();
+    for ((id, p), t) in snap.poses().zip(snap.timestamps()) {
         let d = from_daemon[&id];
         assert!(
             (d.x - p.x).abs() < 1e-12 && (d.y - p.y).abs() < 1e-12 && (d.theta - p.theta).abs() < 1e-12,
             "keyframe {id}: daemon {d:?} vs embedded {p:?}"
         );
+        let k = graph.index_of(id).unwrap();
+        assert_eq!(
+            (d.timestamp_ns, t),
+            if k.is_multiple_of(2) {
+                (stamp(k), stamp(k))
+            } else {
+                (0, 0)
+            }
+        );
     }
+    // the header carries the newest keyframe's covariance, as the engine
+    // gives it
+    let h = last.header();
+    let newest = graph.id_of(graph.len() - 1);
+    assert_eq!((h.has_covariance, h.covariance_keyframe), (1, newest));
+    let sigma = embedded.engine().marginal(newest).unwrap();
+    let mut i = 0;
+    for r in 0..3 {
+        for c in r..3 {
+            let scale = sigma[(r, r)].max(sigma[(c, c)]);
+            assert!(
+                (h.covariance[i] - sigma[(r, c)]).abs() <= 1e-9 * scale,
+                "{r},{c}: {} vs {}",
+                h.covariance[i],
+                sigma[(r, c)]
+            );
+            i += 1;
+        }
+    }
+    assert!(h.covariance[0] > 0.0 && h.covariance[6..].iter().all(|&v| v == 0.0));
+    drop(last);
     assert!(
         daemon.signal(libc::SIGINT).success(),
         "SIGINT must stop the daemon cleanly too"

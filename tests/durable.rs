@@ -71,6 +71,7 @@ fn a_second_map_for_a_state_directory_is_refused() {
         estimate: slamd::geometry::Pose2::IDENTITY,
         lin: slamd::geometry::Pose2::IDENTITY,
         joined: true,
+        timestamp_ns: 0,
     });
     std::fs::write(dir.join("map"), map.encode()).unwrap();
     let other = dir.join("other.map");

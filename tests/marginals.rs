@@ -112,7 +112,15 @@ fn assert_close(got: &DMatrix<f64>, want: &DMatrix<f64>, what: &str) -> Result<(
     prop_assert_eq!(got.shape(), want.shape());
     let scale = want.diagonal().iter().fold(1e-12_f64, |m, v| m.max(v.abs()));
     let err = (got - want).amax();
-    prop_assert!(err <= 1e-9 * scale, "{}: off by {:e} (scale {:e})\n{}\n{}", what, err, scale, got, want);
+    prop_assert!(
+        err <= 1e-9 * scale,
+        "{}: off by {:e} (scale {:e})\n{}\n{}",
+        what,
+        err,
+        scale,
+        got,
+        want
+    );
     Ok(())
 }
 
@@ -126,7 +134,9 @@ fn check_engine<P: Numeric>(
     let d = P::D;
     let sigma = dense_covariance(graph, poses);
     for k in 0..poses.len() {
-        let got = engine.marginal(k as u64).map_err(|e| TestCaseError::fail(e.to_string()))?;
+        let got = engine
+            .marginal(k as u64)
+            .map_err(|e| TestCaseError::fail(e.to_string()))?;
         assert_close(&got, &block(&sigma, d, k, k), &format!("marginal {k}"))?;
     }
     for &(a, b) in pairs {
@@ -136,7 +146,8 @@ fn check_engine<P: Numeric>(
         let mut want = DMatrix::zeros(2 * d, 2 * d);
         for (r, x) in [a, b].into_iter().enumerate() {
             for (c, y) in [a, b].into_iter().enumerate() {
-                want.view_mut((r * d, c * d), (d, d)).copy_from(&block(&sigma, d, x, y));
+                want.view_mut((r * d, c * d), (d, d))
+                    .copy_from(&block(&sigma, d, x, y));
             }
         }
         assert_close(&got, &want, &format!("joint marginal {a}, {b}"))?;
@@ -195,21 +206,27 @@ fn graph_of<P: Numeric>(
     for (e, &(i, j)) in pairs.iter().enumerate() {
         let (z, info) = measure(e, &truth[i].between(&truth[j]));
         let (a, b) = (i as u64, j as u64);
-        g.add_edge(a, b, z, info, EdgeKind::from_ids(a, b)).expect("valid edge");
+        g.add_edge(a, b, z, info, EdgeKind::from_ids(a, b))
+            .expect("valid edge");
     }
     (g, pairs)
 }
 
 fn information2(w: [f64; 3]) -> Information {
     let (a, b, c) = (1.0 + 99.0 * w[0], 1.0 + 99.0 * w[1], 10.0 + 990.0 * w[2]);
-    Information::from_upper([a, 0.3 * (a * b).sqrt() * (w[2] - 0.5), 0.0, b, 0.1, c]).expect("positive definite")
+    Information::from_upper([a, 0.3 * (a * b).sqrt() * (w[2] - 0.5), 0.0, b, 0.1, c])
+        .expect("positive definite")
 }
 
 fn information3(w: [f64; 3]) -> Information6 {
     let mut u = Information6::identity().upper();
     // diagonal entries of the upper triangle, row by row
     for (r, idx) in [0usize, 6, 11, 15, 18, 20].into_iter().enumerate() {
-        u[idx] = if r < 3 { 1.0 + 99.0 * w[r] } else { 10.0 + 990.0 * w[r - 3] };
+        u[idx] = if r < 3 {
+            1.0 + 99.0 * w[r]
+        } else {
+            10.0 + 990.0 * w[r - 3]
+        };
     }
     u[1] = 0.2 * (u[0] * u[6]).sqrt() * (w[2] - 0.5);
     Information6::from_upper(u).expect("positive definite")
@@ -321,7 +338,10 @@ fn marginals_of_unknown_and_unjoined_keyframes_are_refused() {
     assert_eq!(err.to_string(), "edge refers to unknown keyframe 7");
     let err = engine.marginal(1).expect_err("not joined");
     assert!(matches!(err, EngineError::NoCovariance(1, _)), "{err}");
-    assert_eq!(err.to_string(), "no covariance for keyframe 1: it has no edge to the map yet");
+    assert_eq!(
+        err.to_string(),
+        "no covariance for keyframe 1: it has no edge to the map yet"
+    );
     // the gauge is held fixed
     assert_eq!(engine.marginal(0).expect("the gauge"), DMatrix::zeros(3, 3));
 }
@@ -331,7 +351,9 @@ fn marginals_of_unknown_and_unjoined_keyframes_are_refused() {
 #[test]
 fn one_edge_gives_its_own_covariance_in_the_body_frame() {
     let mut engine = Engine::new(config());
-    engine.add_keyframe(0, Some(Pose2::new(0.0, 0.0, 0.0))).expect("gauge");
+    engine
+        .add_keyframe(0, Some(Pose2::new(0.0, 0.0, 0.0)))
+        .expect("gauge");
     engine.add_keyframe(1, None).expect("fresh id");
     let info = Information::from_upper([4.0, 0.0, 0.0, 1.0, 0.0, 25.0]).expect("positive definite");
     let z = Pose2::new(1.0, 0.0, 0.7);

@@ -89,3 +89,34 @@ fn a_map_saved_with_an_unjoined_newest_keyframe_restores() {
     restored.update();
     assert_eq!(restored.snapshot().len(), 201);
 }
+
+/// Keyframe timestamps go into the saved map and come back with the
+/// restored engine's snapshots; keyframes sent without one keep none.
+#[test]
+fn keyframe_timestamps_survive_a_saved_map() {
+    let g = read("intel_sesync.g2o").prefix(60);
+    let mut first = Engine::new(deterministic());
+    let stamp = |k: usize| {
+        if k.is_multiple_of(3) {
+            0
+        } else {
+            1_000_000_007 * k as u64
+        }
+    };
+    for (k, group) in g.by_newer().iter().enumerate() {
+        first.add_keyframe_at(g.id_of(k), None, stamp(k)).unwrap();
+        for &e in group {
+            first.add_edge(g.edge_input(e)).unwrap();
+        }
+        first.update();
+    }
+    let bytes = first.map().encode();
+    let map: MapFile = MapFile::decode(Path::new("intel.map"), &bytes).unwrap();
+    let saved: Vec<u64> = map.keyframes.iter().map(|k| k.timestamp_ns).collect();
+    assert_eq!(saved, (0..60).map(stamp).collect::<Vec<_>>());
+    let restored = Engine::restore(deterministic(), &map, false).unwrap();
+    let snap = restored.snapshot();
+    let back: Vec<(u64, u64)> = snap.poses().map(|(id, _)| id).zip(snap.timestamps()).collect();
+    let want: Vec<(u64, u64)> = (0..60).map(|k| (g.id_of(k), stamp(k))).collect();
+    assert_eq!(back, want);
+}

@@ -60,10 +60,10 @@ impl Publish for Embedded {
     fn add_keyframe(
         &mut self,
         id: KeyframeId,
-        _timestamp_ns: u64,
+        timestamp_ns: u64,
         guess: Option<Pose2>,
     ) -> Result<(), ClientError> {
-        self.engine.add_keyframe(id, guess)?;
+        self.engine.add_keyframe_at(id, guess, timestamp_ns)?;
         Ok(())
     }
 

@@ -27,6 +27,7 @@
 //!
 //! [snapshot]
 //! max_rate_hz = 0.0            # 0: one snapshot per processed batch
+//! covariance = true            # the newest keyframe's covariance in each header
 //!
 //! [gps]                        # see slamd::gps::GpsConfig
 //! # origin = "45.5138,9.2110"  # ENU origin LAT,LON[,HEIGHT]; default: the first fix
@@ -134,11 +135,17 @@ impl Default for IpcConfig {
 pub struct SnapshotConfig {
     /// Upper bound on snapshots per second (0: one per processed batch).
     pub max_rate_hz: f64,
+    /// Whether each snapshot's header carries the marginal covariance of
+    /// its newest keyframe ([`Engine::marginal`](crate::engine::Engine::marginal)).
+    pub covariance: bool,
 }
 
 impl Default for SnapshotConfig {
     fn default() -> Self {
-        Self { max_rate_hz: 0.0 }
+        Self {
+            max_rate_hz: 0.0,
+            covariance: true,
+        }
     }
 }
 

@@ -10,9 +10,9 @@ use slamd_protocol::codec::{gps_reason, reject, Origin};
 use slamd_protocol::{Pose, Rejection, RejectionReason, Switch};
 use slamd_types::RigidMotion;
 
-/// Keyframe `id`'s pose `p` in the map frame, with its ENU position and
-/// heading when the map is georeferenced (zeros before).
-pub fn pose_out<P: RigidMotion>(id: KeyframeId, p: &P, georef: Option<&Georef>) -> Pose {
+/// Keyframe `id`'s pose `p` in the map frame and its timestamp, with its
+/// ENU position and heading when the map is georeferenced (zeros before).
+pub fn pose_out<P: RigidMotion>(id: KeyframeId, p: &P, timestamp_ns: u64, georef: Option<&Georef>) -> Pose {
     let [x, y, z] = p.position3();
     let [qx, qy, qz, qw] = p.orientation();
     let theta = p.heading();
@@ -31,6 +31,7 @@ pub fn pose_out<P: RigidMotion>(id: KeyframeId, p: &P, georef: Option<&Georef>) 
         north: enu.y,
         up: georef.map_or(0.0, |g| z + g.up),
         heading: enu.theta,
+        timestamp_ns,
     }
 }
 

@@ -396,7 +396,7 @@ mod tests {
             (
                 |e| e.protocol = 99,
                 RejectionReason::ProtocolVersion,
-                "message speaks protocol 99, the daemon 4",
+                "message speaks protocol 99, the daemon 5",
             ),
             (
                 |e| e.dimension = 3,

@@ -11,7 +11,7 @@
 use iceoryx2::prelude::*;
 
 /// The layout version of every message below. Bump it on any change.
-pub const PROTOCOL_VERSION: u32 = 4;
+pub const PROTOCOL_VERSION: u32 = 5;
 
 /// Numbers that write a pose in [`Keyframe::guess`] and [`Edge::measurement`]:
 /// the first 3 in the plane, all 7 in space.
@@ -168,6 +168,9 @@ pub struct Pose {
     pub up: f64,
     /// Heading from east, counter-clockwise (rad), when georeferenced.
     pub heading: f64,
+    /// The keyframe's [`Keyframe::timestamp_ns`] (0: the frontend gave
+    /// none).
+    pub timestamp_ns: u64,
 }
 
 impl Pose {
@@ -321,6 +324,19 @@ pub struct SnapshotHeader {
     pub origin: [f64; 3],
     /// Progress of the most recent frontends.
     pub acks: [FrontendAck; MAX_FRONTENDS],
+    /// 1 when `covariance` holds the marginal covariance of keyframe
+    /// `covariance_keyframe`, the newest in the snapshot (the daemon's
+    /// `snapshot.covariance` setting).
+    pub has_covariance: u32,
+    /// Zero.
+    pub reserved: u32,
+    /// The keyframe whose covariance `covariance` is.
+    pub covariance_keyframe: u64,
+    /// Its covariance's upper triangle row by row, in the pose's own frame
+    /// (GTSAM's `Marginals` convention): the first 6 over `(x, y, θ)` in
+    /// the plane, all 21 over `(x, y, z, rx, ry, rz)` in space (m, rad;
+    /// the rotation as a rotation vector). Relative to the gauge keyframe.
+    pub covariance: [f64; INFORMATION_UPPER],
 }
 
 impl SnapshotHeader {
@@ -484,7 +500,8 @@ mod tests {
         assert_eq!(std::mem::size_of::<Keyframe>(), 96);
         assert_eq!(std::mem::size_of::<Edge>(), 264);
         assert_eq!(std::mem::size_of::<GpsFix>(), 96);
-        assert_eq!(std::mem::size_of::<Pose>(), 104);
+        assert_eq!(std::mem::size_of::<Pose>(), 112);
+        assert_eq!(std::mem::size_of::<SnapshotHeader>(), 432);
         assert_eq!(std::mem::align_of::<SnapshotHeader>(), 8);
     }
 }

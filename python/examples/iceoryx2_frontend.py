@@ -36,7 +36,7 @@ import time
 
 import iceoryx2 as iox2
 
-PROTOCOL_VERSION = 4
+PROTOCOL_VERSION = 5
 PROTOCOL_KEY = "slamd.protocol"
 U32, U64, F64 = ctypes.c_uint32, ctypes.c_uint64, ctypes.c_double
 
@@ -67,9 +67,9 @@ class Edge(ctypes.Structure):
 
 @_named("slamd::Pose")
 class Pose(ctypes.Structure):
-    _fields_ = [(n, U64 if n == "id" else F64) for n in
+    _fields_ = [(n, U64 if n in ("id", "timestamp_ns") else F64) for n in
                 ("id", "x", "y", "z", "qx", "qy", "qz", "qw", "theta",
-                 "east", "north", "up", "heading")]
+                 "east", "north", "up", "heading", "timestamp_ns")]
 
 
 @_named("slamd::FrontendAck")
@@ -84,7 +84,9 @@ class SnapshotHeader(ctypes.Structure):
                 ("keyframes", U64), ("edges", U64), ("rejected", U64),
                 ("held", U64), ("resolves", U64), ("fixes", U64),
                 ("georeferenced", U32), ("has_origin", U32),
-                ("origin", F64 * 3), ("acks", FrontendAck * 8)]
+                ("origin", F64 * 3), ("acks", FrontendAck * 8),
+                ("has_covariance", U32), ("reserved", U32),
+                ("covariance_keyframe", U64), ("covariance", F64 * 21)]
 
 
 @_named("slamd::DaemonStatus")
@@ -103,8 +105,8 @@ class Rejection(ctypes.Structure):
                 ("text", ctypes.c_char * 120)]
 
 
-for _t, _size in ((Keyframe, 96), (Edge, 264), (Pose, 104), (SnapshotHeader, 248),
-                  (DaemonStatus, 440), (Rejection, 160)):
+for _t, _size in ((Keyframe, 96), (Edge, 264), (Pose, 112), (SnapshotHeader, 432),
+                  (DaemonStatus, 624), (Rejection, 160)):
     assert ctypes.sizeof(_t) == _size and ctypes.alignment(_t) == 8, _t
 
 

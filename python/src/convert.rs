@@ -9,8 +9,10 @@
 use crate::error;
 use numpy::{PyArray1, PyArray2, PyArrayMethods};
 use pyo3::prelude::*;
-use slamd::graph::{EdgeKind, InformationMatrix, Pose3, RigidMotion};
+use slamd::engine::{EdgeInput, FixInput};
 use slamd::geometry::Pose2;
+use slamd::gps::Geodetic;
+use slamd::graph::{EdgeKind, InformationMatrix, Pose3, RigidMotion};
 
 /// What the bindings need of a pose type beyond [`RigidMotion`].
 pub trait PyPose: RigidMotion {
@@ -24,7 +26,10 @@ impl PyPose for Pose2 {
     fn from_numbers(v: &[f64]) -> PyResult<Self> {
         match v {
             &[x, y, theta] => Ok(Pose2::new(x, y, theta)),
-            _ => Err(error(format!("a planar pose is (x, y, theta); got {} numbers", v.len()))),
+            _ => Err(error(format!(
+                "a planar pose is (x, y, theta); got {} numbers",
+                v.len()
+            ))),
         }
     }
     fn numbers(&self) -> Vec<f64> {
@@ -34,9 +39,12 @@ impl PyPose for Pose2 {
 
 impl PyPose for Pose3 {
     fn from_numbers(v: &[f64]) -> PyResult<Self> {
-        let a: [f64; 7] = v
-            .try_into()
-            .map_err(|_| error(format!("a spatial pose is (x, y, z, qx, qy, qz, qw); got {} numbers", v.len())))?;
+        let a: [f64; 7] = v.try_into().map_err(|_| {
+            error(format!(
+                "a spatial pose is (x, y, z, qx, qy, qz, qw); got {} numbers",
+                v.len()
+            ))
+        })?;
         Pose3::from_xyz_quaternion(a)
             .ok_or_else(|| error("a spatial pose needs finite numbers and a quaternion of unit norm"))
     }
@@ -76,6 +84,41 @@ pub fn information<P: RigidMotion>(value: &Bound<'_, PyAny>) -> PyResult<P::Info
     P::Information::from_upper_slice(&upper).map_err(error)
 }
 
+/// An edge from its Python values (see [`pose`], [`information`], [`kind`]).
+pub fn edge<P: PyPose>(
+    from: u64,
+    to: u64,
+    measurement: &Bound<'_, PyAny>,
+    information: &Bound<'_, PyAny>,
+    kind_name: Option<&str>,
+) -> PyResult<EdgeInput<P>> {
+    Ok(EdgeInput::new(
+        from,
+        to,
+        pose::<P>(measurement)?,
+        self::information::<P>(information)?,
+        kind(kind_name, from, to)?,
+    ))
+}
+
+/// A GPS fix: WGS84 degrees and height (m), the (east, north) covariance
+/// (m², row major) and the height's variance (None: free).
+pub fn fix(
+    keyframe: u64,
+    lat: f64,
+    lon: f64,
+    height: f64,
+    covariance: [f64; 4],
+    height_variance: Option<f64>,
+) -> PyResult<FixInput> {
+    Ok(FixInput {
+        keyframe,
+        position: Geodetic::new(lat, lon, height).map_err(error)?,
+        covariance,
+        height_variance,
+    })
+}
+
 /// The default kind of an edge: odometry between consecutive ids, else a
 /// loop closure (the usual reading of a dataset).
 pub fn kind(name: Option<&str>, from: u64, to: u64) -> PyResult<EdgeKind> {
@@ -110,7 +153,10 @@ pub fn rows<'py>(py: Python<'py>, width: usize, flat: Vec<f64>) -> PyResult<Boun
 }
 
 /// Poses as an `n × PARAMS` array.
-pub fn pose_rows<'py, P: PyPose>(py: Python<'py>, poses: impl Iterator<Item = P>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+pub fn pose_rows<'py, P: PyPose>(
+    py: Python<'py>,
+    poses: impl Iterator<Item = P>,
+) -> PyResult<Bound<'py, PyArray2<f64>>> {
     rows(py, P::PARAMS, poses.flat_map(|p| p.numbers()).collect())
 }
 

@@ -1,14 +1,12 @@
 //! `slamd.Frontend` and `slamd.Snapshots`: a running daemon, over shared
 //! memory.
 
-use crate::convert::{self, ids, rows, PyPose};
+use crate::convert::{self, ids, rows};
 use crate::engine::Snapshot;
 use crate::error;
 use pyo3::prelude::*;
-use slamd::engine::{EdgeInput, FixInput};
 use slamd::geometry::Pose2;
-use slamd::gps::Geodetic;
-use slamd::graph::{Pose3, RigidMotion};
+use slamd::graph::Pose3;
 use slamd_protocol::transport::SnapshotLink;
 use slamd_protocol::{Endpoint, Frontend as Link};
 use std::time::Duration;
@@ -22,24 +20,6 @@ use std::time::Duration;
 pub struct Frontend {
     link: Link,
     dimension: u32,
-}
-
-fn publish_edge<P: RigidMotion + PyPose>(
-    link: &mut Link,
-    from: u64,
-    to: u64,
-    measurement: &Bound<'_, PyAny>,
-    information: &Bound<'_, PyAny>,
-    kind: Option<&str>,
-) -> PyResult<u64> {
-    let edge = EdgeInput::new(
-        from,
-        to,
-        convert::pose::<P>(measurement)?,
-        convert::information::<P>(information)?,
-        convert::kind(kind, from, to)?,
-    );
-    link.publish_edge(&edge).map_err(error)
 }
 
 #[pymethods]
@@ -69,7 +49,12 @@ impl Frontend {
     /// Publishes a keyframe, with an optional initial pose and its time
     /// (ns, the frontend's clock). Returns its message number.
     #[pyo3(signature = (id, guess = None, timestamp_ns = 0))]
-    fn add_keyframe(&mut self, id: u64, guess: Option<&Bound<'_, PyAny>>, timestamp_ns: u64) -> PyResult<u64> {
+    fn add_keyframe(
+        &mut self,
+        id: u64,
+        guess: Option<&Bound<'_, PyAny>>,
+        timestamp_ns: u64,
+    ) -> PyResult<u64> {
         if self.dimension == 2 {
             let guess = guess.map(convert::pose::<Pose2>).transpose()?;
             self.link.publish_keyframe(id, timestamp_ns, guess)
@@ -92,10 +77,13 @@ impl Frontend {
         kind: Option<&str>,
     ) -> PyResult<u64> {
         if self.dimension == 2 {
-            publish_edge::<Pose2>(&mut self.link, from_id, to_id, measurement, information, kind)
+            let edge = convert::edge::<Pose2>(from_id, to_id, measurement, information, kind)?;
+            self.link.publish_edge(&edge)
         } else {
-            publish_edge::<Pose3>(&mut self.link, from_id, to_id, measurement, information, kind)
+            let edge = convert::edge::<Pose3>(from_id, to_id, measurement, information, kind)?;
+            self.link.publish_edge(&edge)
         }
+        .map_err(error)
     }
 
     /// Publishes a GPS fix, as `Engine.add_gps` takes it.
@@ -109,12 +97,7 @@ impl Frontend {
         covariance: [f64; 4],
         height_variance: Option<f64>,
     ) -> PyResult<u64> {
-        let fix = FixInput {
-            keyframe,
-            position: Geodetic::new(lat, lon, height).map_err(error)?,
-            covariance,
-            height_variance,
-        };
+        let fix = convert::fix(keyframe, lat, lon, height, covariance, height_variance)?;
         self.link.add_gps(&fix).map_err(error)
     }
 
@@ -144,9 +127,30 @@ fn daemon_snapshot(py: Python<'_>, s: &slamd_protocol::transport::SnapshotSample
     let h = s.header();
     let poses = s.poses();
     let (width, flat): (usize, Vec<f64>) = if h.dimension == 3 {
-        (7, poses.iter().flat_map(|p| [p.x, p.y, p.z, p.qx, p.qy, p.qz, p.qw]).collect())
+        (
+            7,
+            poses
+                .iter()
+                .flat_map(|p| [p.x, p.y, p.z, p.qx, p.qy, p.qz, p.qw])
+                .collect(),
+        )
     } else {
         (3, poses.iter().flat_map(|p| [p.x, p.y, p.theta]).collect())
+    };
+    let covariance = if h.has_covariance != 0 {
+        let dof = if width == 7 { 6 } else { 3 };
+        let mut sigma = vec![0.0; dof * dof];
+        let mut i = 0;
+        for r in 0..dof {
+            for c in r..dof {
+                sigma[r * dof + c] = h.covariance[i];
+                sigma[c * dof + r] = h.covariance[i];
+                i += 1;
+            }
+        }
+        Some(rows(py, dof, sigma)?.unbind())
+    } else {
+        None
     };
     Ok(Snapshot {
         version: h.version,
@@ -156,6 +160,9 @@ fn daemon_snapshot(py: Python<'_>, s: &slamd_protocol::transport::SnapshotSample
         edges: h.edges,
         ids: ids(py, poses.iter().map(|p| p.id).collect()).unbind(),
         poses: rows(py, width, flat)?.unbind(),
+        timestamps: ids(py, poses.iter().map(|p| p.timestamp_ns).collect()).unbind(),
+        covariance_keyframe: (h.has_covariance != 0).then_some(h.covariance_keyframe),
+        covariance,
     })
 }
 

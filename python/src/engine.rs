@@ -4,15 +4,14 @@ use crate::convert::{self, ids, pose_rows, PyPose};
 use crate::error;
 use numpy::{PyArray1, PyArray2};
 use pyo3::prelude::*;
-use slamd::engine::{EdgeInput, Engine as Core, EngineConfig, EnginePose, FixInput};
+use slamd::engine::{Engine as Core, EngineConfig, EnginePose};
 use slamd::geometry::Pose2;
-use slamd::gps::Geodetic;
 use slamd::graph::Pose3;
 
-/// One engine per dimension.
+/// One engine per dimension (boxed: the two differ in size).
 enum Inner {
-    Planar(Core<Pose2>),
-    Spatial(Core<Pose3>),
+    Planar(Box<Core<Pose2>>),
+    Spatial(Box<Core<Pose3>>),
 }
 
 macro_rules! on_engine {
@@ -58,6 +57,14 @@ pub struct Snapshot {
     pub ids: Py<PyArray1<u64>>,
     /// One row per keyframe: `(x, y, theta)` or `(x, y, z, qx, qy, qz, qw)`.
     pub poses: Py<PyArray2<f64>>,
+    /// Each row's keyframe timestamp (ns; 0: none given).
+    pub timestamps: Py<PyArray1<u64>>,
+    /// From a daemon: the keyframe whose covariance `covariance` is (the
+    /// newest), else None.
+    pub covariance_keyframe: Option<u64>,
+    /// From a daemon: that keyframe's marginal covariance, as
+    /// `Engine.marginal` gives it; else None.
+    pub covariance: Option<Py<PyArray2<f64>>>,
 }
 
 #[pymethods]
@@ -87,30 +94,20 @@ fn snapshot<P: EnginePose + PyPose>(py: Python<'_>, e: &Core<P>) -> PyResult<Sna
         edges: e.graph().edges().len() as u64,
         ids: ids(py, id).unbind(),
         poses: pose_rows(py, poses.into_iter())?.unbind(),
+        timestamps: ids(py, s.timestamps().collect()).unbind(),
+        covariance_keyframe: None,
+        covariance: None,
     })
 }
 
-fn add_keyframe<P: EnginePose + PyPose>(e: &mut Core<P>, id: u64, guess: Option<&Bound<'_, PyAny>>) -> PyResult<usize> {
-    let guess = guess.map(convert::pose::<P>).transpose()?;
-    e.add_keyframe(id, guess).map_err(error)
-}
-
-fn add_edge<P: EnginePose + PyPose>(
+fn add_keyframe<P: EnginePose + PyPose>(
     e: &mut Core<P>,
-    from: u64,
-    to: u64,
-    measurement: &Bound<'_, PyAny>,
-    information: &Bound<'_, PyAny>,
-    kind: Option<&str>,
+    id: u64,
+    guess: Option<&Bound<'_, PyAny>>,
+    timestamp_ns: u64,
 ) -> PyResult<usize> {
-    let edge = EdgeInput::new(
-        from,
-        to,
-        convert::pose::<P>(measurement)?,
-        convert::information::<P>(information)?,
-        convert::kind(kind, from, to)?,
-    );
-    e.add_edge(edge).map_err(error)
+    let guess = guess.map(convert::pose::<P>).transpose()?;
+    e.add_keyframe_at(id, guess, timestamp_ns).map_err(error)
 }
 
 fn square<'py>(py: Python<'py>, m: nalgebra::DMatrix<f64>) -> PyResult<Bound<'py, PyArray2<f64>>> {
@@ -133,8 +130,8 @@ impl Engine {
         };
         config.outliers.enabled = outlier_filter;
         let inner = match dimension {
-            2 => Inner::Planar(Core::create(config)),
-            3 => Inner::Spatial(Core::create(config)),
+            2 => Inner::Planar(Box::new(Core::create(config))),
+            3 => Inner::Spatial(Box::new(Core::create(config))),
             d => return Err(error(format!("dimension {d}: 2 or 3"))),
         };
         Ok(Self { inner })
@@ -150,11 +147,17 @@ impl Engine {
     }
 
     /// Adds a keyframe (the first is the gauge), with an optional initial
-    /// pose in the map frame; without one its first edge places it.
+    /// pose in the map frame (without one its first edge places it) and
+    /// the time it was taken (ns; 0: none), which snapshots carry.
     /// Returns its index.
-    #[pyo3(signature = (id, guess = None))]
-    fn add_keyframe(&mut self, id: u64, guess: Option<&Bound<'_, PyAny>>) -> PyResult<usize> {
-        on_engine!(&mut self.inner, e, P => add_keyframe::<P>(e, id, guess))
+    #[pyo3(signature = (id, guess = None, timestamp_ns = 0))]
+    fn add_keyframe(
+        &mut self,
+        id: u64,
+        guess: Option<&Bound<'_, PyAny>>,
+        timestamp_ns: u64,
+    ) -> PyResult<usize> {
+        on_engine!(&mut self.inner, e, P => add_keyframe::<P>(e, id, guess, timestamp_ns))
     }
 
     /// Adds an edge `T_ij` from keyframe `from_id` to `to_id` with its
@@ -171,7 +174,10 @@ impl Engine {
         information: &Bound<'_, PyAny>,
         kind: Option<&str>,
     ) -> PyResult<usize> {
-        on_engine!(&mut self.inner, e, P => add_edge::<P>(e, from_id, to_id, measurement, information, kind))
+        on_engine!(&mut self.inner, e, P => {
+            let edge = convert::edge::<P>(from_id, to_id, measurement, information, kind)?;
+            e.add_edge(edge).map_err(error)
+        })
     }
 
     /// Adds a GPS fix (WGS84 degrees, height in m) taken at a known
@@ -187,12 +193,7 @@ impl Engine {
         covariance: [f64; 4],
         height_variance: Option<f64>,
     ) -> PyResult<()> {
-        let fix = FixInput {
-            keyframe,
-            position: Geodetic::new(lat, lon, height).map_err(error)?,
-            covariance,
-            height_variance,
-        };
+        let fix = convert::fix(keyframe, lat, lon, height, covariance, height_variance)?;
         on_engine!(&mut self.inner, e, _P => e.add_gps(fix).map_err(error))
     }
 
@@ -235,7 +236,12 @@ impl Engine {
     }
 
     /// The joint covariance of keyframes `a` and `b`, `a`'s rows first.
-    fn joint_marginal<'py>(&mut self, py: Python<'py>, a: u64, b: u64) -> PyResult<Bound<'py, PyArray2<f64>>> {
+    fn joint_marginal<'py>(
+        &mut self,
+        py: Python<'py>,
+        a: u64,
+        b: u64,
+    ) -> PyResult<Bound<'py, PyArray2<f64>>> {
         let m = on_engine!(&mut self.inner, e, _P => e.joint_marginal(a, b)).map_err(error)?;
         square(py, m)
     }

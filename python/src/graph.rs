@@ -25,7 +25,10 @@ fn edge_rows<'py, P: PyPose>(py: Python<'py>, g: &PoseGraph<P>) -> PyResult<Boun
     pose_rows(py, g.edges().iter().map(|e| e.measurement))
 }
 
-fn information_rows<'py, P: PyPose>(py: Python<'py>, g: &PoseGraph<P>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+fn information_rows<'py, P: PyPose>(
+    py: Python<'py>,
+    g: &PoseGraph<P>,
+) -> PyResult<Bound<'py, PyArray2<f64>>> {
     let width = P::Information::UPPER;
     let mut flat = vec![0.0; width * g.edges().len()];
     for (e, out) in g.edges().iter().zip(flat.chunks_mut(width)) {
@@ -129,8 +132,14 @@ impl Graph {
 #[pyfunction]
 #[pyo3(signature = (path, skip_invalid = false))]
 pub fn read(py: Python<'_>, path: PathBuf, skip_invalid: bool) -> PyResult<Graph> {
-    let on_invalid = if skip_invalid { OnInvalid::Skip } else { OnInvalid::Refuse };
-    let (inner, _) = py.detach(|| read_any_graph_with(&path, on_invalid)).map_err(error)?;
+    let on_invalid = if skip_invalid {
+        OnInvalid::Skip
+    } else {
+        OnInvalid::Refuse
+    };
+    let (inner, _) = py
+        .detach(|| read_any_graph_with(&path, on_invalid))
+        .map_err(error)?;
     Ok(Graph { inner })
 }
 
@@ -178,7 +187,13 @@ fn solution<P: PyPose + slamd::nonlinear::LiePose>(
 /// origin.
 #[pyfunction]
 #[pyo3(signature = (graph, polish = true, robust = false, formulation = "two-stage"))]
-pub fn solve(py: Python<'_>, graph: &Graph, polish: bool, robust: bool, formulation: &str) -> PyResult<Solution> {
+pub fn solve(
+    py: Python<'_>,
+    graph: &Graph,
+    polish: bool,
+    robust: bool,
+    formulation: &str,
+) -> PyResult<Solution> {
     let formulation: Formulation = formulation.parse().map_err(error)?;
     let options = BatchOptions {
         formulation,

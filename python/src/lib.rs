@@ -1,10 +1,10 @@
 //! slamd from Python: the `slamd._slamd` extension module, which maturin
 //! builds (`pip install ./python`) and `slamd/__init__.py` re-exports.
 //!
-//! - [`graph`]: `read`, `Graph`, `solve`, `Solution`: the batch pipeline;
-//! - [`engine`]: `Engine`, `Snapshot`: the incremental engine in-process,
+//! - `graph`: `read`, `Graph`, `solve`, `Solution`: the batch pipeline;
+//! - `engine`: `Engine`, `Snapshot`: the incremental engine in-process,
 //!   marginals included;
-//! - [`daemon`]: `Frontend`, `Snapshots`: a running daemon over shared
+//! - `daemon`: `Frontend`, `Snapshots`: a running daemon over shared
 //!   memory.
 //!
 //! Every Rust error becomes `slamd.SlamdError` with the same message.

@@ -77,6 +77,7 @@ def test_engine_recovers_an_exact_loop_and_its_marginals_are_consistent():
         row = snap.poses[list(snap.ids).index(i)]
         assert abs(row[0] - x) < 1e-9 and abs(row[1] - y) < 1e-9
     assert list(engine.switches()) == [1.0] * 9
+    assert list(snap.timestamps) == [0] * 9 and snap.covariance is None
     # the gauge is fixed; the loop's far side (keyframe 4) is the least sure
     assert np.all(engine.marginal(0) == 0.0)
     variances = [engine.marginal(k)[0, 0] + engine.marginal(k)[1, 1] for k in range(9)]
@@ -158,5 +159,16 @@ def test_frontend_and_snapshots_talk_to_a_real_daemon(daemons):
     row = snap.poses[list(snap.ids).index(6)]
     assert np.allclose(row[:2], (1.0, 1.0), atol=1e-6)
     assert snap.chi2 < 1e-9
+    assert list(snap.timestamps) == [1_000 * k for k in range(8)]
+    # the newest keyframe's covariance, as the same engine in-process gives it
+    engine = slamd.Engine(background=False)
+    for k, step in enumerate(square_walk()):
+        engine.add_keyframe(k)
+        if k > 0:
+            engine.add_edge(k - 1, k, step, info)
+    engine.add_edge(0, 7, (0.0, 1.0, -math.pi / 2), info, kind="loop_closure")
+    engine.update()
+    assert snap.covariance_keyframe == 7
+    assert np.allclose(snap.covariance, engine.marginal(7), rtol=1e-9, atol=1e-15)
     with pytest.raises(slamd.SlamdError):
         slamd.Frontend(daemon.namespace, dimension=5)

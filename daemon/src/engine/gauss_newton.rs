@@ -261,7 +261,9 @@ impl<P: EnginePose> GaussNewton<P> {
             let factor = self.chol.factor();
             // one pose fits the narrower scratch, whose rows are half as long
             let form = if slices.len() <= 6 {
-                self.marginal.form(factor, &slices).map(|f| f.resize_generic(nalgebra::Const::<12>, nalgebra::Const::<12>, 0.0))
+                self.marginal
+                    .form(factor, &slices)
+                    .map(|f| f.resize_generic(nalgebra::Const::<12>, nalgebra::Const::<12>, 0.0))
             } else {
                 self.pose_marginal.form(factor, &slices)
             };

@@ -106,6 +106,8 @@ pub struct Engine<P: EnginePose = Pose2> {
     work_base: FactorWork,
     /// Every fix taken, as received (what a saved map keeps).
     fixes: Vec<FixInput>,
+    /// Each keyframe's timestamp (ns; 0: none), by arrival.
+    timestamps: Vec<u64>,
 }
 
 impl Engine {
@@ -140,6 +142,7 @@ impl<P: EnginePose> Engine<P> {
             work_done: FactorWork::default(),
             work_base: FactorWork::default(),
             fixes: Vec::new(),
+            timestamps: Vec::new(),
             config,
         }
     }
@@ -153,7 +156,19 @@ impl<P: EnginePose> Engine<P> {
     /// the map frame; without one, the keyframe's first edge to the map
     /// places it. Returns its index.
     pub fn add_keyframe(&mut self, id: KeyframeId, guess: Option<P>) -> Result<usize, EngineError> {
+        self.add_keyframe_at(id, guess, 0)
+    }
+
+    /// [`Self::add_keyframe`] with the time the frontend took it (ns on its
+    /// clock; 0: none), which snapshots and saved maps carry.
+    pub fn add_keyframe_at(
+        &mut self,
+        id: KeyframeId,
+        guess: Option<P>,
+        timestamp_ns: u64,
+    ) -> Result<usize, EngineError> {
         self.submit(Op::Keyframe { id, guess })?;
+        self.timestamps.push(timestamp_ns);
         Ok(self.state.model.graph.len() - 1)
     }
 
@@ -282,6 +297,7 @@ impl<P: EnginePose> Engine<P> {
             chi2: self.state.chi2(),
             resolves: self.stats.resolves,
             keyframes: m.graph.keyframes(),
+            timestamps: &self.timestamps,
             joined: &m.joined,
             poses: self.state.estimate(),
             georef: self.state.georef(),
@@ -476,6 +492,7 @@ impl<P: EnginePose> Engine<P> {
         engine.schedule.polished(&state);
         engine.state = state;
         engine.fixes = map.fixes.clone();
+        engine.timestamps = map.keyframes.iter().map(|k| k.timestamp_ns).collect();
         engine.version = 1;
         if polish == Polish::Full {
             engine.stats.resolves += 1;
@@ -487,7 +504,7 @@ impl<P: EnginePose> Engine<P> {
     /// switches, the estimate, the GPS origin, fixes and georeference.
     /// Edge origins, acknowledgements and held messages are left empty.
     pub fn map(&self) -> crate::store::MapFile<P> {
-        restore::map_of(&self.state, self.gps_origin(), &self.fixes)
+        restore::map_of(&self.state, self.gps_origin(), &self.fixes, &self.timestamps)
     }
 
     /// Adds a GPS fix to a known keyframe (the daemon holds fixes that

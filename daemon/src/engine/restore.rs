@@ -132,12 +132,14 @@ fn fix_of<P: EnginePose>(
     Ok(GpsFix::at(f, &position, k, &frame))
 }
 
-/// The map `state` holds (its edges' origins, the acknowledgements and
-/// the held messages are the daemon's to fill in).
+/// The map `state` holds, with each keyframe's timestamp (its edges'
+/// origins, the acknowledgements and the held messages are the daemon's
+/// to fill in).
 pub(super) fn map_of<P: EnginePose>(
     state: &State<P>,
     origin: Option<Geodetic>,
     fixes: &[FixInput],
+    timestamps: &[u64],
 ) -> MapFile<P> {
     let m = &state.model;
     let (estimate, lin) = (state.estimate(), state.linearisation());
@@ -150,6 +152,7 @@ pub(super) fn map_of<P: EnginePose>(
             estimate: estimate[k],
             lin: lin.get(k).copied().unwrap_or(estimate[k]),
             joined: m.joined[k],
+            timestamp_ns: timestamps.get(k).copied().unwrap_or(0),
         })
         .collect();
     let edges = (0..m.graph.edges().len())

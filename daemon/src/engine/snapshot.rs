@@ -15,6 +15,7 @@ pub struct Snapshot<'a, P: RigidMotion = Pose2> {
     /// Number of completed re-solves so far.
     pub resolves: usize,
     pub(super) keyframes: &'a [Keyframe<P>],
+    pub(super) timestamps: &'a [u64],
     pub(super) joined: &'a [bool],
     pub(super) poses: &'a [P],
     /// The map→ENU motion, once two GPS fixes have georeferenced the map.
@@ -28,6 +29,23 @@ impl<'a, P: RigidMotion> Snapshot<'a, P> {
     pub fn poses(&self) -> impl Iterator<Item = (KeyframeId, P)> + 'a {
         let (k, j, p) = (self.keyframes, self.joined, self.poses);
         (0..k.len()).filter(move |&i| j[i]).map(move |i| (k[i].id, p[i]))
+    }
+
+    /// The timestamp (ns; 0: none) of each keyframe [`Self::poses`] yields,
+    /// in the same order.
+    pub fn timestamps(&self) -> impl Iterator<Item = u64> + 'a {
+        let (t, j) = (self.timestamps, self.joined);
+        (0..j.len())
+            .filter(move |&i| j[i])
+            .map(move |i| t.get(i).copied().unwrap_or(0))
+    }
+
+    /// The newest keyframe in the estimate.
+    pub fn newest(&self) -> Option<KeyframeId> {
+        (0..self.joined.len())
+            .rev()
+            .find(|&i| self.joined[i])
+            .map(|i| self.keyframes[i].id)
     }
 
     /// The pose of one keyframe, if it is in the estimate.

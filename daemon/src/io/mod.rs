@@ -21,7 +21,7 @@ mod write;
 pub use error::{ReadError, ReadErrorKind};
 pub use gps_csv::{read_fixes, FixRecord};
 pub use poses::{read_ground_truth, read_ground_truth3, read_pose_table};
-pub use trajectory::{read_trajectory, write_trajectory, FromSpatial, Trajectory};
+pub use trajectory::{read_trajectory, write_trajectory, write_trajectory_at, FromSpatial, Trajectory};
 pub use write::{write_g2o, write_g2o3, write_pose_table};
 
 use crate::geometry::Pose2;

@@ -2,9 +2,10 @@
 //! `t x y z qx qy qz qw` line per keyframe) and KITTI (one line per
 //! keyframe: the 3×4 matrix `[R | t]` row by row).
 //!
-//! Graph files carry no timestamps, so a TUM line's time is the keyframe's
-//! id; a KITTI line has no key at all, so line `k` is the graph's `k`-th
-//! keyframe. A planar pose is written with `z = 0` and the rotation by θ
+//! A TUM line's time is the keyframe's timestamp in seconds where the
+//! frontend gave one (a saved map keeps them), else the keyframe's id (graph
+//! files carry no timestamps); a KITTI line has no key at all, so line `k`
+//! is the graph's `k`-th keyframe. A planar pose is written with `z = 0` and the rotation by θ
 //! about z, and read back as `(x, y, yaw)`.
 
 use super::{ReadError, ReadErrorKind};
@@ -61,11 +62,32 @@ pub fn write_trajectory<P: RigidMotion>(
     ids: &[KeyframeId],
     poses: &[P],
 ) -> std::io::Result<()> {
-    for (id, p) in ids.iter().zip(poses) {
+    write_trajectory_at(out, layout, ids, &[], poses)
+}
+
+/// [`write_trajectory`] with each keyframe's timestamp (ns; 0 or missing:
+/// none): a TUM line's time is the timestamp in seconds where there is
+/// one, else the keyframe's id.
+pub fn write_trajectory_at<P: RigidMotion>(
+    out: &mut impl Write,
+    layout: Trajectory,
+    ids: &[KeyframeId],
+    timestamps: &[u64],
+    poses: &[P],
+) -> std::io::Result<()> {
+    for (k, (id, p)) in ids.iter().zip(poses).enumerate() {
         let [x, y, z] = p.position3();
         let [qx, qy, qz, qw] = p.orientation();
         match layout {
-            Trajectory::Tum => writeln!(out, "{id} {x} {y} {z} {qx} {qy} {qz} {qw}")?,
+            Trajectory::Tum => match timestamps.get(k).copied().unwrap_or(0) {
+                0 => writeln!(out, "{id} {x} {y} {z} {qx} {qy} {qz} {qw}")?,
+                t => writeln!(
+                    out,
+                    "{}.{:09} {x} {y} {z} {qx} {qy} {qz} {qw}",
+                    t / 1_000_000_000,
+                    t % 1_000_000_000
+                )?,
+            },
             Trajectory::Kitti => {
                 let q = UnitQuaternion::from_quaternion(Quaternion::new(qw, qx, qy, qz));
                 let r = q.to_rotation_matrix();
@@ -162,6 +184,23 @@ mod tests {
         write_trajectory(&mut out, layout, &ids, poses).unwrap();
         let text = String::from_utf8(out).unwrap();
         parse_trajectory(Path::new("t"), &text, layout, &ids).unwrap()
+    }
+
+    #[test]
+    fn a_tum_line_carries_the_timestamp_where_there_is_one() {
+        let poses = [Pose2::new(1.0, 0.0, 0.0), Pose2::new(2.0, 0.0, 0.0)];
+        let mut out = Vec::new();
+        write_trajectory_at(
+            &mut out,
+            Trajectory::Tum,
+            &[7, 8],
+            &[1_700_000_000_000_000_042, 0],
+            &poses,
+        )
+        .unwrap();
+        let text = String::from_utf8(out).unwrap();
+        let times: Vec<&str> = text.lines().map(|l| l.split(' ').next().unwrap()).collect();
+        assert_eq!(times, ["1700000000.000000042", "8"]);
     }
 
     #[test]

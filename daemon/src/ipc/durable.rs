@@ -183,7 +183,7 @@ impl<P: EnginePose> Fold<P> {
 
     fn record(&mut self, map: &mut MapFile<P>, r: Record<P>) {
         match r {
-            Record::Keyframe(_, id, guess) => {
+            Record::Keyframe(_, id, guess, timestamp_ns) => {
                 if !self.ids.insert(id) {
                     self.refused += 1;
                     return;
@@ -195,6 +195,7 @@ impl<P: EnginePose> Fold<P> {
                     estimate: at,
                     lin: at,
                     joined: false,
+                    timestamp_ns,
                 });
                 for w in self.waiting.remove(&id).unwrap_or_default() {
                     self.record(map, w);

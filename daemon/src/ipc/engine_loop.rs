@@ -16,16 +16,16 @@ use slamd_protocol::codec::Origin;
 use slamd_protocol::message::kind;
 use slamd_protocol::transport::{Outlet, TransportError};
 use slamd_protocol::{
-    DaemonStatus, FrontendAck, Rejection, RejectionReason, SnapshotHeader, SwitchesHeader, MAX_FRONTENDS,
-    PROTOCOL_VERSION,
+    DaemonStatus, FrontendAck, Rejection, RejectionReason, SnapshotHeader, SwitchesHeader, INFORMATION_UPPER,
+    MAX_FRONTENDS, PROTOCOL_VERSION,
 };
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 /// What the IPC thread hands over; `P` is the pose type the daemon serves.
 #[derive(Clone, Debug)]
 pub enum Msg<P: EnginePose> {
-    /// A checked keyframe.
-    Keyframe(Origin, KeyframeId, Option<P>),
+    /// A checked keyframe with its timestamp (ns; 0: none).
+    Keyframe(Origin, KeyframeId, Option<P>, u64),
     /// A checked edge.
     Edge(Origin, EdgeInput<P>),
     /// A checked GPS fix.
@@ -206,7 +206,7 @@ impl<P: EnginePose> EngineLoop<P> {
     /// Applies one message; `false` means stop.
     fn handle(&mut self, msg: Msg<P>) -> bool {
         match msg {
-            Msg::Keyframe(o, id, guess) => self.take(Record::Keyframe(o, id, guess)),
+            Msg::Keyframe(o, id, guess, t) => self.take(Record::Keyframe(o, id, guess, t)),
             Msg::Edge(o, edge) => self.take(Record::Edge(o, edge)),
             Msg::Gps(o, fix) => self.take(Record::Fix(o, fix)),
             Msg::Rejected(r) => {
@@ -254,7 +254,7 @@ impl<P: EnginePose> EngineLoop<P> {
     /// Applies a message taken in.
     fn apply(&mut self, r: Record<P>) {
         match r {
-            Record::Keyframe(o, id, guess) => match self.engine.add_keyframe(id, guess) {
+            Record::Keyframe(o, id, guess, t) => match self.engine.add_keyframe_at(id, guess, t) {
                 Ok(_) => {
                     self.counters.keyframes += 1;
                     for h in self.held.release(id) {
@@ -413,6 +413,7 @@ impl<P: EnginePose> EngineLoop<P> {
         let t0 = Instant::now();
         let report = self.engine.update();
         let solved = t0.elapsed();
+        let covariance = self.newest_covariance();
         let snap = self.engine.snapshot();
         let header = SnapshotHeader {
             protocol: PROTOCOL_VERSION,
@@ -433,11 +434,16 @@ impl<P: EnginePose> EngineLoop<P> {
             has_origin: u32::from(snap.origin.is_some()),
             origin: snap.origin.map_or([0.0; 3], |o| [o.lat, o.lon, o.height]),
             acks: self.durable,
+            has_covariance: u32::from(covariance.is_some()),
+            reserved: 0,
+            covariance_keyframe: covariance.map_or(0, |c| c.0),
+            covariance: covariance.map_or([0.0; INFORMATION_UPPER], |c| c.1),
         };
         let georef = snap.georef;
         let poses = snap
             .poses()
-            .map(|(id, p)| wire::pose_out(id, &p, georef.as_ref()));
+            .zip(snap.timestamps())
+            .map(|((id, p), t)| wire::pose_out(id, &p, t, georef.as_ref()));
         self.last_header = SnapshotHeader {
             poses: snap.len() as u64,
             ..header
@@ -462,6 +468,32 @@ impl<P: EnginePose> EngineLoop<P> {
         }
         self.dirty = false;
         self.last_publish = Some(Instant::now());
+    }
+
+    /// The newest keyframe's marginal covariance as the header carries it
+    /// (its upper triangle), when configured and readable.
+    fn newest_covariance(&mut self) -> Option<(KeyframeId, [f64; INFORMATION_UPPER])> {
+        if !self.config.snapshot.covariance {
+            return None;
+        }
+        let id = self.engine.snapshot().newest()?;
+        let sigma = match self.engine.marginal(id) {
+            Ok(s) => s,
+            Err(e) => {
+                tracing::debug!(error = %e, "No covariance in this snapshot.");
+                return None;
+            }
+        };
+        let mut upper = [0.0; INFORMATION_UPPER];
+        let n = sigma.nrows();
+        let mut i = 0;
+        for r in 0..n {
+            for c in r..n {
+                upper[i] = sigma[(r, c)];
+                i += 1;
+            }
+        }
+        Some((id, upper))
     }
 
     fn publish_status(&mut self) {

@@ -22,7 +22,8 @@
 //! - held messages (edges and fixes waiting for their keyframe): each a
 //!   `u32` length and a journal record's payload;
 //! - (not in version 1) the georeference's up offset (`f64`, 0 without
-//!   one) and each fix's height variance (`f64`, 0: the height is free).
+//!   one) and each fix's height variance (`f64`, 0: the height is free);
+//! - (version 3 on) each keyframe's timestamp (`u64` ns, 0: none).
 
 use super::bytes::{frame, unframe, Framed, Get, Put};
 use super::journal::{check_head, head, HEAD};
@@ -53,6 +54,8 @@ pub struct MapKeyframe<P: RigidMotion = Pose2> {
     pub lin: P,
     /// Whether it was linked to the gauge.
     pub joined: bool,
+    /// When the frontend took it (ns; 0: it gave no time).
+    pub timestamp_ns: u64,
 }
 
 /// An edge of a saved map.
@@ -141,6 +144,7 @@ impl<P: RigidMotion> MapFile<P> {
                 estimate: pose,
                 lin: pose,
                 joined: true,
+                timestamp_ns: 0,
             })
             .collect();
         let edges = (0..graph.edges().len())
@@ -148,7 +152,10 @@ impl<P: RigidMotion> MapFile<P> {
                 edge: graph.edge_input(e),
                 scale: 1.0,
                 switch: 1.0,
-                origin: Origin { frontend: 0, sequence: 0 },
+                origin: Origin {
+                    frontend: 0,
+                    sequence: 0,
+                },
             })
             .collect();
         Self {
@@ -215,6 +222,9 @@ impl<P: RigidMotion> MapFile<P> {
         p.f64(self.georef.map_or(0.0, |g| g.georef.up));
         for f in &self.fixes {
             p.f64(f.height_variance.unwrap_or(0.0));
+        }
+        for k in &self.keyframes {
+            p.u64(k.timestamp_ns);
         }
         let mut out = head(MAGIC, self.generation);
         out.reserve(8 + p.0.len());
@@ -299,6 +309,7 @@ fn decode_body<P: RigidMotion>(body: &[u8], generation: u64, version: u32) -> Re
             estimate,
             lin,
             joined,
+            timestamp_ns: 0,
         });
     }
     for _ in 0..g.count(17 + pose_bytes + 8 * P::Information::UPPER + 28)? {
@@ -378,6 +389,11 @@ fn decode_body<P: RigidMotion>(body: &[u8], generation: u64, version: u32) -> Re
                     f.keyframe
                 )));
             }
+        }
+    }
+    if version >= 3 {
+        for k in &mut map.keyframes {
+            k.timestamp_ns = g.u64()?;
         }
     }
     g.finish()?;

@@ -37,8 +37,10 @@ use std::time::Duration;
 /// The version of the journal and map formats this slamd writes. It reads
 /// [`OLDEST_FORMAT`] up to this one and refuses any other. Version 2 added
 /// 3-D maps: its map body starts with the dimension (version 1 maps are
-/// 2-D), and 3-D journal records have tags of their own.
-pub const FORMAT_VERSION: u32 = 2;
+/// 2-D), and 3-D journal records have tags of their own. Version 3 added
+/// keyframe timestamps: journal records of their own for a keyframe with
+/// one, and one `u64` per keyframe at the end of the map body.
+pub const FORMAT_VERSION: u32 = 3;
 
 /// The oldest format version this slamd reads.
 pub const OLDEST_FORMAT: u32 = 1;

@@ -26,8 +26,8 @@ use slamd_types::{
 /// One message the daemon took in; `P` is the pose type of the map.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Record<P: RigidMotion = Pose2> {
-    /// A keyframe and its guess.
-    Keyframe(Origin, KeyframeId, Option<P>),
+    /// A keyframe, its guess and its timestamp (ns; 0: none).
+    Keyframe(Origin, KeyframeId, Option<P>, u64),
     /// An edge.
     Edge(Origin, EdgeInput<P>),
     /// A GPS fix.
@@ -43,6 +43,9 @@ const REFUSED: u8 = 4;
 const KEYFRAME3: u8 = 5;
 const EDGE3: u8 = 6;
 const FIX_HEIGHT: u8 = 7;
+/// A keyframe with a timestamp: the keyframe's payload, then the `u64`.
+const KEYFRAME_AT: u8 = 8;
+const KEYFRAME3_AT: u8 = 9;
 
 /// The tags of a keyframe and an edge in `dimension`.
 fn tags(dimension: u32) -> (u8, u8) {
@@ -50,6 +53,15 @@ fn tags(dimension: u32) -> (u8, u8) {
         (KEYFRAME3, EDGE3)
     } else {
         (KEYFRAME, EDGE)
+    }
+}
+
+/// The tag of a keyframe with a timestamp in `dimension`.
+fn stamped_tag(dimension: u32) -> u8 {
+    if dimension == 3 {
+        KEYFRAME3_AT
+    } else {
+        KEYFRAME_AT
     }
 }
 
@@ -65,7 +77,8 @@ impl<P: RigidMotion> Record<P> {
     pub fn encode(&self, p: &mut Put) {
         let (keyframe, edge) = tags(P::DIMENSION);
         let (tag, o) = match self {
-            Record::Keyframe(o, ..) => (keyframe, o),
+            Record::Keyframe(o, .., 0) => (keyframe, o),
+            Record::Keyframe(o, ..) => (stamped_tag(P::DIMENSION), o),
             Record::Edge(o, _) => (edge, o),
             Record::Fix(o, f) if f.height_variance.is_some() => (FIX_HEIGHT, o),
             Record::Fix(o, _) => (FIX, o),
@@ -75,10 +88,13 @@ impl<P: RigidMotion> Record<P> {
         p.u32(o.frontend);
         p.u64(o.sequence);
         match self {
-            Record::Keyframe(_, id, guess) => {
+            Record::Keyframe(_, id, guess, timestamp) => {
                 p.u64(*id);
                 p.u8(u8::from(guess.is_some()));
                 put_pose(p, &guess.unwrap_or(P::IDENTITY));
+                if *timestamp != 0 {
+                    p.u64(*timestamp);
+                }
             }
             Record::Edge(_, e) => put_edge(p, e),
             Record::Fix(_, f) => {
@@ -100,18 +116,22 @@ impl<P: RigidMotion> Record<P> {
             sequence: g.u64()?,
         };
         let (keyframe, edge) = tags(P::DIMENSION);
+        let stamped = stamped_tag(P::DIMENSION);
         let r = match tag {
-            KEYFRAME | EDGE | KEYFRAME3 | EDGE3 if tag != keyframe && tag != edge => {
+            KEYFRAME | EDGE | KEYFRAME3 | EDGE3 | KEYFRAME_AT | KEYFRAME3_AT
+                if tag != keyframe && tag != edge && tag != stamped =>
+            {
                 return Err(StoreError::Dimension {
                     found: 5 - P::DIMENSION,
                     serving: P::DIMENSION,
                 })
             }
-            t if t == keyframe => {
+            t if t == keyframe || t == stamped => {
                 let id = g.u64()?;
                 let has = g.u8()?;
                 let pose = get_pose(&mut g)?;
-                Record::Keyframe(o, id, (has != 0).then_some(pose))
+                let timestamp = if t == stamped { g.u64()? } else { 0 };
+                Record::Keyframe(o, id, (has != 0).then_some(pose), timestamp)
             }
             t if t == edge => Record::Edge(o, get_edge(&mut g)?),
             FIX => Record::Fix(o, get_fix(&mut g, false)?),
@@ -221,8 +241,13 @@ mod tests {
         };
         let info = Information::from_upper([10.0, 1.0, 0.0, 20.0, 0.5, 30.0]).unwrap();
         vec![
-            Record::Keyframe(o(1), 0, None),
-            Record::Keyframe(o(2), 1, Some(Pose2::new(1.0, -2.0, 0.5))),
+            Record::Keyframe(o(1), 0, None, 0),
+            Record::Keyframe(
+                o(2),
+                1,
+                Some(Pose2::new(1.0, -2.0, 0.5)),
+                1_700_000_000_123_456_789,
+            ),
             Record::Edge(
                 o(3),
                 EdgeInput::new(0, 1, Pose2::new(1.0, 0.1, -0.2), info, EdgeKind::LoopClosure),
@@ -295,8 +320,8 @@ mod tests {
         let z = Pose3::from_xyz_rpy([1.0, 2.0, -0.5, 0.1, 0.2, -0.3]);
         let info = Information6::identity().scaled(2.0);
         for r in [
-            Record::Keyframe(o, 4, Some(z)),
-            Record::Keyframe(o, 5, None),
+            Record::Keyframe(o, 4, Some(z), 0),
+            Record::Keyframe(o, 5, None, 42),
             Record::Edge(o, EdgeInput::new(4, 5, z, info, EdgeKind::LoopClosure)),
         ] {
             let mut p = Put::default();
@@ -311,8 +336,11 @@ mod tests {
                     assert!((a.measurement.translation - b.measurement.translation).norm() < 1e-15);
                     assert!(a.measurement.rotation.angle_to(&b.measurement.rotation) < 1e-12);
                 }
-                (Record::Keyframe(_, a, ga), Record::Keyframe(_, b, gb)) => {
-                    assert_eq!((a, ga.map(|g| g.translation)), (b, gb.map(|g| g.translation)));
+                (Record::Keyframe(_, a, ga, ta), Record::Keyframe(_, b, gb, tb)) => {
+                    assert_eq!(
+                        (a, ga.map(|g| g.translation), ta),
+                        (b, gb.map(|g| g.translation), tb)
+                    );
                 }
                 _ => panic!("{back:?} is not {r:?}"),
             }

@@ -17,7 +17,7 @@ fn stream(n: u64) -> Vec<Record> {
     let mut s = 0;
     for k in 0..n {
         s += 1;
-        out.push(Record::Keyframe(origin(s), k, None));
+        out.push(Record::Keyframe(origin(s), k, None, 0));
         if k > 0 {
             s += 1;
             let step = Pose2::new(1.0, 0.0, 0.1);
@@ -149,6 +149,7 @@ fn sample_map() -> MapFile {
                 estimate: Pose2::IDENTITY,
                 lin: Pose2::IDENTITY,
                 joined: true,
+                timestamp_ns: 0,
             },
             MapKeyframe {
                 id: 9,
@@ -156,6 +157,7 @@ fn sample_map() -> MapFile {
                 estimate: Pose2::new(1.1, 2.1, 0.31),
                 lin: Pose2::new(1.05, 2.05, 0.305),
                 joined: true,
+                timestamp_ns: 1_700_000_000_000_000_009,
             },
         ],
         edges: vec![MapEdge {
@@ -268,22 +270,44 @@ fn a_directory_that_cannot_be_written_is_refused_at_start() {
     assert!(err.to_string().contains("cannot create"), "{err}");
 }
 
+/// A map file of format `version` whose body is `body`.
+fn old_map_file(version: u32, generation: u64, body: &[u8]) -> Vec<u8> {
+    let mut old = Vec::new();
+    old.extend_from_slice(map::MAGIC);
+    old.extend_from_slice(&version.to_le_bytes());
+    old.extend_from_slice(&journal::head_crc(map::MAGIC, version, generation).to_le_bytes());
+    old.extend_from_slice(&generation.to_le_bytes());
+    bytes::frame(&mut old, body);
+    old
+}
+
+#[test]
+fn a_version_2_map_reads_without_timestamps() {
+    // version 2 had no keyframe timestamps at the end
+    let mut map = sample_map();
+    let bytes = map.encode();
+    let body = &bytes[journal::HEAD + 8..bytes.len() - 8 * map.keyframes.len()];
+    for k in &mut map.keyframes {
+        k.timestamp_ns = 0;
+    }
+    let old = old_map_file(2, map.generation, body);
+    assert_eq!(MapFile::<Pose2>::decode(Path::new("v2.map"), &old).unwrap(), map);
+}
+
 #[test]
 fn a_version_1_map_reads_as_2d() {
     // version 1 had no dimension byte at the start, nor the georeference's
-    // up and the fixes' height variances at the end
+    // up, the fixes' height variances and the timestamps at the end
     let mut map = sample_map();
     let bytes = map.encode();
-    let tail = 8 * (1 + map.fixes.len());
+    let tail = 8 * (1 + map.fixes.len() + map.keyframes.len());
     let body = &bytes[journal::HEAD + 8 + 1..bytes.len() - tail];
     map.georef.as_mut().unwrap().georef.up = 0.0;
     map.fixes[0].height_variance = None;
-    let mut old = Vec::new();
-    old.extend_from_slice(map::MAGIC);
-    old.extend_from_slice(&1u32.to_le_bytes());
-    old.extend_from_slice(&journal::head_crc(map::MAGIC, 1, map.generation).to_le_bytes());
-    old.extend_from_slice(&map.generation.to_le_bytes());
-    bytes::frame(&mut old, body);
+    for k in &mut map.keyframes {
+        k.timestamp_ns = 0;
+    }
+    let old = old_map_file(1, map.generation, body);
     let path = Path::new("old.map");
     assert_eq!(MapFile::<Pose2>::decode(path, &old).unwrap(), map);
     let err = MapFile::<Pose3>::decode(path, &old).unwrap_err();
@@ -304,6 +328,7 @@ fn a_3d_map_reads_back_and_a_2d_reader_refuses_it() {
                 estimate: Pose3::IDENTITY,
                 lin: Pose3::IDENTITY,
                 joined: true,
+                timestamp_ns: 0,
             },
             MapKeyframe {
                 id: 2,
@@ -311,6 +336,7 @@ fn a_3d_map_reads_back_and_a_2d_reader_refuses_it() {
                 estimate: z,
                 lin: z,
                 joined: true,
+                timestamp_ns: 0,
             },
         ],
         edges: vec![MapEdge {
@@ -319,7 +345,7 @@ fn a_3d_map_reads_back_and_a_2d_reader_refuses_it() {
             switch: 1.0,
             origin: origin(2),
         }],
-        held: vec![Record::Keyframe(origin(3), 7, Some(z))],
+        held: vec![Record::Keyframe(origin(3), 7, Some(z), 5)],
         ..MapFile::default()
     };
     let bytes = map.encode();

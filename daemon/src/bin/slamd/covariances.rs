@@ -35,7 +35,11 @@ pub fn write<P: EnginePose>(
     let mut engine = Engine::<P>::restore(config, &map, false).context("factorising the solution")?;
     let file = std::fs::File::create(path).with_context(|| format!("creating {}", path.display()))?;
     let mut w = std::io::BufWriter::new(file);
-    let axes = if P::DOF == 3 { "x y theta" } else { "x y z rx ry rz" };
+    let axes = if P::DOF == 3 {
+        "x y theta"
+    } else {
+        "x y z rx ry rz"
+    };
     writeln!(
         w,
         "# id, then the covariance's upper triangle row by row over {axes} (the pose's own frame; m, rad)"

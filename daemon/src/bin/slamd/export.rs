@@ -1,4 +1,5 @@
-//! `slamd export MAP --out FILE.g2o`: a saved map as a g2o graph.
+//! `slamd export MAP --out FILE`: a saved map as a g2o graph, or its
+//! trajectory as TUM or KITTI.
 
 use anyhow::Context;
 use clap::Args;
@@ -11,8 +12,10 @@ use std::path::PathBuf;
 pub struct ExportOpts {
     /// A saved map (a state directory's `map` file).
     pub map: PathBuf,
-    /// The g2o file to write: the saved estimate as vertices, the edges
-    /// as received.
+    /// The file to write: `.g2o`, the saved estimate as vertices and the
+    /// edges as received; `.tum` or `.kitti`, the estimate as evo reads it
+    /// (TUM's time: the keyframe's timestamp in s where the frontend gave
+    /// one, else its id).
     #[arg(long, short)]
     pub out: PathBuf,
     /// Leave out the loop closures the outlier filter holds wrong.
@@ -31,7 +34,15 @@ pub fn run(opts: ExportOpts) -> anyhow::Result<()> {
     let file =
         std::fs::File::create(&opts.out).with_context(|| format!("creating {}", opts.out.display()))?;
     let mut out = std::io::BufWriter::new(file);
-    slamd::io::write_g2o(&mut out, &graph, &poses)
+    let written = match slamd::io::Trajectory::of(&opts.out) {
+        Some(layout) => {
+            let ids: Vec<_> = map.keyframes.iter().map(|k| k.id).collect();
+            let stamps: Vec<_> = map.keyframes.iter().map(|k| k.timestamp_ns).collect();
+            slamd::io::write_trajectory_at(&mut out, layout, &ids, &stamps, &poses)
+        }
+        None => slamd::io::write_g2o(&mut out, &graph, &poses),
+    };
+    written
         .and_then(|_| out.flush())
         .with_context(|| format!("writing {}", opts.out.display()))?;
     eprintln!(
