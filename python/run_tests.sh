@@ -5,7 +5,6 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 venv=target/python-venv
 [ -x "$venv/bin/python" ] || python3 -m venv "$venv"
-"$venv/bin/pip" install -q --upgrade pip
 # The dev profile reuses what `cargo test` built; `pip install ./python`
 # without it builds the release a user wants.
 MATURIN_PEP517_ARGS="--profile dev" "$venv/bin/pip" install -q "./python[test]"

@@ -109,10 +109,9 @@ impl Frontend {
     /// Waits up to `timeout` seconds until the daemon has acknowledged
     /// message `sequence` (default: the last one sent); False on timeout.
     #[pyo3(signature = (sequence = None, timeout = 10.0))]
-    fn wait_acknowledged(&mut self, py: Python<'_>, sequence: Option<u64>, timeout: f64) -> PyResult<bool> {
+    fn wait_acknowledged(&mut self, sequence: Option<u64>, timeout: f64) -> PyResult<bool> {
         let sequence = sequence.unwrap_or(self.link.last_sequence());
         let wait = Duration::try_from_secs_f64(timeout).map_err(error)?;
-        let _ = py;
         self.link.wait_acknowledged(sequence, wait).map_err(error)
     }
 }
