@@ -51,6 +51,8 @@ pub struct Cut {
 pub struct Contents<P: RigidMotion = Pose2> {
     /// The map generation the journal follows.
     pub generation: u64,
+    /// The format version its head names.
+    pub version: u32,
     /// Its whole, checked records, in order.
     pub records: Vec<Record<P>>,
     /// Bytes that hold them (the head included).
@@ -118,7 +120,7 @@ pub fn read<P: RigidMotion>(path: &Path) -> Result<Option<Contents<P>>, StoreErr
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
         Err(e) => return Err(StoreError::io("read", path, e)),
     };
-    let (generation, _) = check_head(path, &bytes, MAGIC, "journal")?;
+    let (generation, version) = check_head(path, &bytes, MAGIC, "journal")?;
     let mut records = Vec::new();
     let mut at = HEAD;
     let mut cut = None;
@@ -144,6 +146,7 @@ pub fn read<P: RigidMotion>(path: &Path) -> Result<Option<Contents<P>>, StoreErr
     }
     Ok(Some(Contents {
         generation,
+        version,
         records,
         valid_len: at as u64,
         cut,
@@ -162,6 +165,29 @@ impl Journal {
         let tmp = path.with_extension("tmp");
         super::write_atomically(&tmp, path, &head(MAGIC, generation))?;
         Self::append_to(path, HEAD as u64, generation, policy, interval)
+    }
+
+    /// A journal following map `generation` that holds `records`, in this
+    /// version's format, replacing the file at `path` atomically: how a
+    /// journal of an older format is taken up, so that no record of this
+    /// format ever sits under an older head (which an older slamd would
+    /// cut as a corrupt tail).
+    pub fn rewrite<P: RigidMotion>(
+        path: &Path,
+        generation: u64,
+        records: &[Record<P>],
+        policy: SyncPolicy,
+        interval: Duration,
+    ) -> Result<Self, StoreError> {
+        let mut bytes = head(MAGIC, generation);
+        for r in records {
+            let mut p = Put::default();
+            r.encode(&mut p);
+            frame(&mut bytes, &p.0);
+        }
+        let tmp = path.with_extension("tmp");
+        super::write_atomically(&tmp, path, &bytes)?;
+        Self::append_to(path, bytes.len() as u64, generation, policy, interval)
     }
 
     /// Opens an existing journal to append after its first `valid_len`

@@ -259,9 +259,14 @@ impl StateDir {
         let _ = std::fs::remove_file(&next);
         let journal = match found {
             Some(c) if c.generation == generation => {
+                let journal = if c.version < FORMAT_VERSION {
+                    Journal::rewrite(&path, generation, &c.records, config.sync, interval)?
+                } else {
+                    Journal::append_to(&path, c.valid_len, generation, config.sync, interval)?
+                };
                 recovered.tail = c.records;
                 recovered.cut = c.cut;
-                Journal::append_to(&path, c.valid_len, generation, config.sync, interval)?
+                journal
             }
             Some(c) if c.generation > generation => {
                 return Err(StoreError::Mismatch {

@@ -52,6 +52,35 @@ fn the_journal_reads_back_what_was_committed() {
     assert!(rec.cut.is_none() && rec.map.is_none());
 }
 
+/// A journal of the previous format is rewritten in this one before
+/// anything is appended, records kept, so an older slamd reading it back
+/// refuses it by its version rather than cutting the new records.
+#[test]
+fn an_older_journal_is_rewritten_in_this_format_before_appending() {
+    let dir = temp_dir("upgrade");
+    let records = stream(6);
+    write_journal(&dir, &records);
+    let path = dir.join("journal");
+    let mut bytes = std::fs::read(&path).unwrap();
+    bytes[8..12].copy_from_slice(&2u32.to_le_bytes());
+    let generation = u64::from_le_bytes(bytes[16..24].try_into().unwrap());
+    bytes[12..16].copy_from_slice(&journal::head_crc(journal::MAGIC, 2, generation).to_le_bytes());
+    std::fs::write(&path, &bytes).unwrap();
+    let (mut state, rec) = StateDir::open::<Pose2>(&dir, &StateConfig::default()).unwrap();
+    assert_eq!(rec.tail, records);
+    let stamped = Record::Keyframe(origin(99), 99, None, 123);
+    state.journal().append(&stamped);
+    state.journal().commit().unwrap();
+    let after = std::fs::read(&path).unwrap();
+    assert_eq!(
+        u32::from_le_bytes(after[8..12].try_into().unwrap()),
+        FORMAT_VERSION
+    );
+    let back = journal::read::<Pose2>(&path).unwrap().unwrap();
+    assert_eq!(back.records[..records.len()], records[..]);
+    assert_eq!(back.records.last(), Some(&stamped));
+}
+
 /// The journal cut at every byte offset inside its last record: the
 /// daemon restarts with every record before it, the cut one is gone, and
 /// appending afterwards yields a journal that reads whole.
