@@ -170,17 +170,20 @@ fn two_frontends_interleave_edges() {
     close(&poses, &truth, 1e-6);
     assert!(header.chi2 < 1e-9, "{}", header.chi2);
     assert!(snaps.rejections().unwrap().is_empty());
-    // a subscriber that comes to the daemon at rest gets the latest
-    // snapshot within a tick, with no new input
+    // once the daemon is at rest (no snapshot for a second), a subscriber
+    // that comes then and waits gets the latest snapshot within a tick
+    let mut newest = header.version;
+    while let Some(s) = snaps.wait(Duration::from_secs(1)).unwrap() {
+        newest = s.header().version;
+    }
     let late = Snapshots::open(&daemon.namespace).unwrap();
-    let deadline = Instant::now() + Duration::from_secs(5);
-    let got = loop {
-        if let Some(s) = late.latest().unwrap() {
-            break s;
-        }
-        assert!(Instant::now() < deadline, "no snapshot for a late subscriber");
-        std::thread::sleep(Duration::from_millis(20));
-    };
+    let start = Instant::now();
+    let got = late
+        .wait(Duration::from_secs(5))
+        .unwrap()
+        .expect("the latest snapshot");
+    assert!(start.elapsed() < Duration::from_secs(2), "{:?}", start.elapsed());
+    assert_eq!(got.header().version, newest);
     assert_eq!((got.header().keyframes, got.header().edges), (40, 39 + loops));
     assert!(daemon.stop().success());
 }

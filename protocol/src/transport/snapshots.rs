@@ -44,6 +44,10 @@ impl SwitchesSample {
 /// timeout has microsecond resolution and reads zero as "forever".
 const MIN_WAIT: Duration = Duration::from_micros(2);
 
+/// How often [`SnapshotLink::wait`] looks for a snapshot that came without
+/// an event.
+const LOOK_EVERY: Duration = Duration::from_millis(50);
+
 /// Subscriber to snapshots, switches and rejections of one namespace.
 pub struct SnapshotLink {
     _node: Node<ipc::Service>,
@@ -105,6 +109,9 @@ impl SnapshotLink {
     }
 
     /// Waits up to `timeout` for a snapshot newer than the last one taken.
+    /// The event wakes it for every new snapshot; it also looks every
+    /// 50 ms for the latest snapshot, which a daemon at rest hands a new
+    /// subscriber without an event.
     pub fn wait(&self, timeout: Duration) -> Result<Option<SnapshotSample>, TransportError> {
         let deadline = Instant::now() + timeout;
         loop {
@@ -118,7 +125,7 @@ impl SnapshotLink {
                 return Ok(None);
             }
             self.published
-                .timed_wait(|_| {}, left)
+                .timed_wait(|_| {}, left.min(LOOK_EVERY))
                 .map_err(|e| TransportError::other("wait for a snapshot", e))?;
         }
     }
