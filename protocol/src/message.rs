@@ -333,7 +333,8 @@ pub struct SnapshotHeader {
     /// The keyframe whose covariance `covariance` is.
     pub covariance_keyframe: u64,
     /// Its covariance's upper triangle row by row, in the pose's own frame
-    /// (GTSAM's `Marginals` convention): the first 6 over `(x, y, θ)` in
+    /// (GTSAM's `Marginals`, though its Pose3 puts the rotation first):
+    /// the first 6 over `(x, y, θ)` in
     /// the plane, all 21 over `(x, y, z, rx, ry, rz)` in space (m, rad;
     /// the rotation as a rotation vector). Relative to the gauge keyframe.
     pub covariance: [f64; INFORMATION_UPPER],
@@ -502,6 +503,17 @@ mod tests {
         assert_eq!(std::mem::size_of::<GpsFix>(), 96);
         assert_eq!(std::mem::size_of::<Pose>(), 112);
         assert_eq!(std::mem::size_of::<SnapshotHeader>(), 432);
+        assert_eq!(std::mem::size_of::<DaemonStatus>(), 624);
+        assert_eq!(std::mem::size_of::<Switch>(), 40);
+        assert_eq!(std::mem::size_of::<SwitchesHeader>(), 32);
+        assert_eq!(std::mem::size_of::<Rejection>(), 160);
+        assert_eq!(std::mem::offset_of!(Pose, timestamp_ns), 104);
+        assert_eq!(std::mem::offset_of!(SnapshotHeader, acks), 120);
+        assert_eq!(std::mem::offset_of!(SnapshotHeader, has_covariance), 248);
+        assert_eq!(std::mem::offset_of!(SnapshotHeader, covariance_keyframe), 256);
+        assert_eq!(std::mem::offset_of!(SnapshotHeader, covariance), 264);
+        assert_eq!(std::mem::offset_of!(DaemonStatus, snapshot), 64);
+        assert_eq!(std::mem::offset_of!(DaemonStatus, acks), 496);
         assert_eq!(std::mem::align_of::<SnapshotHeader>(), 8);
     }
 }

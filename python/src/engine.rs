@@ -229,7 +229,8 @@ impl Engine {
 
     /// The marginal covariance of keyframe `id`, 3×3 over `(x, y, theta)`
     /// or 6×6 over `(x, y, z, rx, ry, rz)`, in the pose's own frame (GTSAM's
-    /// `Marginals` convention), the gauge held fixed.
+    /// `Marginals`, though its Pose3 puts the rotation first), the gauge
+    /// held fixed.
     fn marginal<'py>(&mut self, py: Python<'py>, id: u64) -> PyResult<Bound<'py, PyArray2<f64>>> {
         let m = on_engine!(&mut self.inner, e, _P => e.marginal(id)).map_err(error)?;
         square(py, m)

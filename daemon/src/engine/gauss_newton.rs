@@ -233,7 +233,10 @@ impl<P: EnginePose> GaussNewton<P> {
     /// (`Vᵀ H⁻¹ V` with `V` the columns' unit vectors, read off the
     /// elimination-tree paths by [`Marginal`], no inverse formed), in the
     /// body-frame tangent `M` ([`LiePose::body_tangent`](crate::nonlinear::LiePose::body_tangent))
-    /// at `lin`. The gauge has zero rows (it is held fixed). Applies the
+    /// of the estimate, the pose it is published with (in the plane `δ` is
+    /// additive, so `Σ` is the estimate's covariance; in space `M` does not
+    /// depend on the pose and the frame is `lin`'s, a Gauss–Newton step
+    /// away). The gauge has zero rows (it is held fixed). Applies the
     /// waiting updates first. `None` when a keyframe has no columns or no
     /// weight (an infinite variance).
     pub fn covariance(&mut self, keyframes: &[usize]) -> Result<Option<DMatrix<f64>>, UpdateError> {
@@ -278,7 +281,7 @@ impl<P: EnginePose> GaussNewton<P> {
         }
         let mut tangent = DMatrix::zeros(m, m);
         for (b, &k) in keyframes.iter().enumerate() {
-            let t = self.lin[k].body_tangent();
+            let t = self.estimate[k].body_tangent();
             for r in 0..dof {
                 for s in 0..dof {
                     tangent[(b * dof + r, b * dof + s)] = t[(r, s)];

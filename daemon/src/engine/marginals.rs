@@ -13,11 +13,12 @@
 //! Covariances are in the body-frame tangent of GTSAM's `Marginals`: a
 //! pose is `X · Exp(ξ)`, `ξ` = translation in the pose's own frame, then
 //! the rotation (`(x, y, θ)` in the plane; `(x, y, z, rx, ry, rz)` in
-//! space, a rotation vector in rad). The gauge keyframe is held fixed, so
+//! space, a rotation vector in rad; GTSAM's Pose3 orders the rotation
+//! block first). The gauge keyframe is held fixed, so
 //! its covariance is zero and every other one is relative to it.
 
 use super::{Engine, EngineError, EnginePose};
-use crate::graph::{GraphError, KeyframeId};
+use crate::graph::KeyframeId;
 use nalgebra::DMatrix;
 
 impl<P: EnginePose> Engine<P> {
@@ -37,7 +38,7 @@ impl<P: EnginePose> Engine<P> {
         let mut slots = Vec::with_capacity(ids.len());
         for &id in ids {
             let model = &self.state.model;
-            let k = model.graph.index_of(id).ok_or(GraphError::UnknownKeyframe(id))?;
+            let k = (model.graph.index_of(id)).ok_or(EngineError::NoCovariance(id, "no such keyframe"))?;
             if !model.joined[k] {
                 return Err(EngineError::NoCovariance(id, "it has no edge to the map yet"));
             }
@@ -46,7 +47,7 @@ impl<P: EnginePose> Engine<P> {
         let Some(gn) = self.state.gauss_newton() else {
             return Err(EngineError::NoCovariance(
                 ids[0],
-                "marginals need the Gauss–Newton system (snapshot = \"gauss-newton\")",
+                "marginals need the Gauss–Newton system (engine.snapshot = \"gauss-newton\")",
             ));
         };
         match gn.covariance(&slots) {

@@ -37,7 +37,8 @@ pub trait LiePose: EdgeCost {
 
     /// `M` with `ξ = M δ` to first order, where `self ⊞ δ = self · Exp(ξ)`:
     /// `ξ` is the translation in the pose's own frame, then the rotation
-    /// (rad; a rotation vector in space), GTSAM's tangent. A covariance
+    /// (rad; a rotation vector in space): GTSAM's tangent, though its Pose3
+    /// puts the rotation first. A covariance
     /// `Σ` over `δ` is `M Σ Mᵀ` over `ξ`.
     fn body_tangent(&self) -> Self::PoseHessian;
 
