@@ -2,9 +2,9 @@
 //! `t x y z qx qy qz qw` line per keyframe) and KITTI (one line per
 //! keyframe: the 3×4 matrix `[R | t]` row by row).
 //!
-//! A TUM line's time is the keyframe's timestamp in seconds where the
-//! frontend gave one (a saved map keeps them), else the keyframe's id (graph
-//! files carry no timestamps); a KITTI line has no key at all, so line `k`
+//! A TUM line's time is the keyframe's timestamp in seconds when every
+//! keyframe written has one (a saved map keeps them), else the keyframe's
+//! id (graph files carry no timestamps); a KITTI line has no key at all, so line `k`
 //! is the graph's `k`-th keyframe. A planar pose is written with `z = 0` and the rotation by θ
 //! about z, and read back as `(x, y, yaw)`.
 
@@ -66,8 +66,9 @@ pub fn write_trajectory<P: RigidMotion>(
 }
 
 /// [`write_trajectory`] with each keyframe's timestamp (ns; 0 or missing:
-/// none): a TUM line's time is the timestamp in seconds where there is
-/// one, else the keyframe's id.
+/// none): a TUM line's time is the timestamp in seconds when every
+/// keyframe has one, else every line's time is the keyframe's id (one
+/// file never mixes the two clocks).
 pub fn write_trajectory_at<P: RigidMotion>(
     out: &mut impl Write,
     layout: Trajectory,
@@ -75,11 +76,12 @@ pub fn write_trajectory_at<P: RigidMotion>(
     timestamps: &[u64],
     poses: &[P],
 ) -> std::io::Result<()> {
+    let stamped = ids.len() <= timestamps.len() && timestamps[..ids.len()].iter().all(|&t| t != 0);
     for (k, (id, p)) in ids.iter().zip(poses).enumerate() {
         let [x, y, z] = p.position3();
         let [qx, qy, qz, qw] = p.orientation();
         match layout {
-            Trajectory::Tum => match timestamps.get(k).copied().unwrap_or(0) {
+            Trajectory::Tum => match if stamped { timestamps[k] } else { 0 } {
                 0 => writeln!(out, "{id} {x} {y} {z} {qx} {qy} {qz} {qw}")?,
                 t => writeln!(
                     out,
@@ -187,20 +189,22 @@ mod tests {
     }
 
     #[test]
-    fn a_tum_line_carries_the_timestamp_where_there_is_one() {
+    fn tum_lines_carry_timestamps_when_every_keyframe_has_one() {
         let poses = [Pose2::new(1.0, 0.0, 0.0), Pose2::new(2.0, 0.0, 0.0)];
-        let mut out = Vec::new();
-        write_trajectory_at(
-            &mut out,
-            Trajectory::Tum,
-            &[7, 8],
-            &[1_700_000_000_000_000_042, 0],
-            &poses,
-        )
-        .unwrap();
-        let text = String::from_utf8(out).unwrap();
-        let times: Vec<&str> = text.lines().map(|l| l.split(' ').next().unwrap()).collect();
-        assert_eq!(times, ["1700000000.000000042", "8"]);
+        let times = |stamps: &[u64]| {
+            let mut out = Vec::new();
+            write_trajectory_at(&mut out, Trajectory::Tum, &[7, 8], stamps, &poses).unwrap();
+            let text = String::from_utf8(out).unwrap();
+            text.lines()
+                .map(|l| l.split(' ').next().unwrap().to_string())
+                .collect::<Vec<_>>()
+        };
+        assert_eq!(
+            times(&[1_700_000_000_000_000_042, 1_700_000_001_500_000_000]),
+            ["1700000000.000000042", "1700000001.500000000"]
+        );
+        // one keyframe without a time: every line keyed by its id
+        assert_eq!(times(&[1_700_000_000_000_000_042, 0]), ["7", "8"]);
     }
 
     #[test]

@@ -13,9 +13,9 @@ pub struct ExportOpts {
     /// A saved map (a state directory's `map` file).
     pub map: PathBuf,
     /// The file to write: `.g2o`, the saved estimate as vertices and the
-    /// edges as received; `.tum` or `.kitti`, the estimate as evo reads it
-    /// (TUM's time: the keyframe's timestamp in s where the frontend gave
-    /// one, else its id).
+    /// edges as received; `.tum` or `.kitti`, the keyframes in the
+    /// estimate as evo reads them (TUM's time: the keyframe's timestamp in
+    /// s when every one has one, else its id).
     #[arg(long, short)]
     pub out: PathBuf,
     /// Leave out the loop closures the outlier filter holds wrong.
@@ -36,9 +36,13 @@ pub fn run(opts: ExportOpts) -> anyhow::Result<()> {
     let mut out = std::io::BufWriter::new(file);
     let written = match slamd::io::Trajectory::of(&opts.out) {
         Some(layout) => {
-            let ids: Vec<_> = map.keyframes.iter().map(|k| k.id).collect();
-            let stamps: Vec<_> = map.keyframes.iter().map(|k| k.timestamp_ns).collect();
-            slamd::io::write_trajectory_at(&mut out, layout, &ids, &stamps, &poses)
+            // the keyframes in the estimate, not those whose edges never
+            // came (they sit at their guess)
+            let joined: Vec<_> = map.keyframes.iter().filter(|k| k.joined).collect();
+            let ids: Vec<_> = joined.iter().map(|k| k.id).collect();
+            let stamps: Vec<_> = joined.iter().map(|k| k.timestamp_ns).collect();
+            let at: Vec<_> = joined.iter().map(|k| k.estimate).collect();
+            slamd::io::write_trajectory_at(&mut out, layout, &ids, &stamps, &at)
         }
         None => slamd::io::write_g2o(&mut out, &graph, &poses),
     };
