@@ -7,7 +7,9 @@
 
 Per file, one run: the ground truth (a noise-free iSAM graph) is written as
 TUM by `slamd solve GT --formulation odometry --out gt.tum` (its poses
-composed along the odometry, as `--ground-truth` composes them), the
+composed along the odometry; `--ground-truth` composes the same noise-free
+edges along a breadth-first spanning tree, so the two truths differ only
+by the file's rounding), the
 estimate by `slamd solve FILE --polish --ground-truth GT --out est.tum
 --json`, and `evo_ape tum gt.tum est.tum -a` (SE(3) Umeyama alignment)
 scores it. The table gives both RMSEs and their difference.

@@ -16,8 +16,8 @@ same poses. Both are Gauss–Newton covariances in the pose's own frame over
 The cost is not quite the same by default: GTSAM's BetweenFactorPose2 error
 is Logmap(Z⁻¹ Xi⁻¹ Xj), g2o's (and slamd's) the (x, y, θ) of Z⁻¹ Xi⁻¹ Xj.
 They agree where the error is zero, but their Jacobians differ to first
-order in the residual's angle, so the covariances differ by about that much
-(1e-3 on Manhattan). `--cost g2o` (the default) hands GTSAM each edge as a
+order in the residual's angle, so the covariances differ (6e-3 at most
+on Manhattan). `--cost g2o` (the default) hands GTSAM each edge as a
 CustomFactor with g2o's error and its Jacobians in GTSAM's tangent, written
 out below; `--cost gtsam` keeps GTSAM's own factors. Per keyframe past the gauge the
 table gives ‖Σ_slamd − Σ_gtsam‖_F / ‖Σ_gtsam‖_F (max and median), and each

@@ -9,7 +9,7 @@ use slamd::geometry::Pose2;
 use slamd::graph::Pose3;
 use slamd_protocol::transport::SnapshotLink;
 use slamd_protocol::{Endpoint, Frontend as Link};
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 /// A frontend publishing to the daemon of `namespace` (the daemon's
 /// `SLAMD_NAMESPACE`, default "slamd"), in `dimension` 2 or 3 (the
@@ -108,12 +108,32 @@ impl Frontend {
 
     /// Waits up to `timeout` seconds until the daemon has acknowledged
     /// message `sequence` (default: the last one sent); False on timeout.
+    /// Ctrl-C interrupts it.
     #[pyo3(signature = (sequence = None, timeout = 10.0))]
-    fn wait_acknowledged(&mut self, sequence: Option<u64>, timeout: f64) -> PyResult<bool> {
+    fn wait_acknowledged(&mut self, py: Python<'_>, sequence: Option<u64>, timeout: f64) -> PyResult<bool> {
         let sequence = sequence.unwrap_or(self.link.last_sequence());
-        let wait = Duration::try_from_secs_f64(timeout).map_err(error)?;
-        self.link.wait_acknowledged(sequence, wait).map_err(error)
+        let deadline = deadline(timeout)?;
+        loop {
+            let slice = deadline.saturating_duration_since(Instant::now()).min(SLICE);
+            if self.link.wait_acknowledged(sequence, slice).map_err(error)? {
+                return Ok(true);
+            }
+            py.check_signals()?;
+            if Instant::now() >= deadline {
+                return Ok(false);
+            }
+        }
     }
+}
+
+/// The longest a wait holds the interpreter before it looks for Ctrl-C
+/// (the iceoryx2 ports cannot leave their thread, so the waits keep the
+/// GIL).
+const SLICE: Duration = Duration::from_millis(100);
+
+/// When a wait of `timeout` seconds ends.
+fn deadline(timeout: f64) -> PyResult<Instant> {
+    Ok(Instant::now() + Duration::try_from_secs_f64(timeout).map_err(error)?)
 }
 
 /// The daemon's pose snapshots of `namespace`.
@@ -184,13 +204,19 @@ impl Snapshots {
     }
 
     /// Waits up to `timeout` seconds for a snapshot newer than the last one
-    /// taken; None on timeout.
+    /// taken; None on timeout. Ctrl-C interrupts it.
     #[pyo3(signature = (timeout = 5.0))]
     fn wait(&self, py: Python<'_>, timeout: f64) -> PyResult<Option<Snapshot>> {
-        let wait = Duration::try_from_secs_f64(timeout).map_err(error)?;
-        match self.link.wait(wait).map_err(error)? {
-            Some(s) => daemon_snapshot(py, &s).map(Some),
-            None => Ok(None),
+        let deadline = deadline(timeout)?;
+        loop {
+            let slice = deadline.saturating_duration_since(Instant::now()).min(SLICE);
+            if let Some(s) = self.link.wait(slice).map_err(error)? {
+                return daemon_snapshot(py, &s).map(Some);
+            }
+            py.check_signals()?;
+            if Instant::now() >= deadline {
+                return Ok(None);
+            }
         }
     }
 }

@@ -71,6 +71,9 @@ pub fn run(opts: SolveOpts) -> anyhow::Result<()> {
         .map(io::read_ground_truth)
         .transpose()?;
     let gps = crate::gps::load(&opts.gps, &graph)?;
+    if opts.covariances.is_some() && gps.is_some() {
+        anyhow::bail!("--covariances does not take GPS fixes in; leave out --gps");
+    }
     let options = BatchOptions {
         formulation: opts.formulation,
         polish: opts.polish,
@@ -83,9 +86,6 @@ pub fn run(opts: SolveOpts) -> anyhow::Result<()> {
 
     if let Some(out) = &opts.out {
         write_result(out, &graph, &sol.poses)?;
-    }
-    if opts.covariances.is_some() && gps.is_some() {
-        anyhow::bail!("--covariances does not take GPS fixes in; leave out --gps");
     }
     let covariance_seconds = opts
         .covariances
