@@ -7,8 +7,9 @@
 //! (it is held fixed), and `H⁻¹` is inverted densely. The engine's
 //! marginals and joint marginals must equal its blocks, turned into the
 //! frame of the estimate they are published with, to 1e-9:
-//! - at arbitrary (noisy, unsolved) poses, through a restored map, so that
-//!   the residuals are not zero;
+//! - at arbitrary (noisy, unsolved) poses, through a restored map whose
+//!   loop closures carry switches in [0.3, 1] (information weighed `s²`),
+//!   so that the residuals are not zero and the weights count;
 //! - on a noise-free graph streamed keyframe by keyframe, so that the
 //!   factor is the one the incremental updates built.
 
@@ -92,15 +93,16 @@ fn jacobian<P: Numeric>(edge: &Edge<P>, poses: &[P], of: usize) -> DMatrix<f64> 
     j
 }
 
-/// `H⁻¹` over keyframes `1..n` (the gauge's rows left out), dense.
-fn dense_covariance<P: Numeric>(graph: &PoseGraph<P>, poses: &[P]) -> DMatrix<f64> {
+/// `H⁻¹` over keyframes `1..n` (the gauge's rows left out), dense, each
+/// edge's information scaled by `weight[e]`.
+fn dense_covariance<P: Numeric>(graph: &PoseGraph<P>, poses: &[P], weight: &[f64]) -> DMatrix<f64> {
     let d = P::D;
     let n = poses.len() - 1;
     let mut h = DMatrix::zeros(d * n, d * n);
-    for edge in graph.edges() {
+    for (edge, w) in graph.edges().iter().zip(weight) {
         let ends = [edge.from, edge.to];
         let js = ends.map(|k| jacobian(edge, poses, k));
-        let omega = P::omega(edge);
+        let omega = P::omega(edge) * *w;
         for (a, ka) in ends.iter().enumerate() {
             for (b, kb) in ends.iter().enumerate() {
                 if *ka == 0 || *kb == 0 {
@@ -140,16 +142,18 @@ fn assert_close(got: &DMatrix<f64>, want: &DMatrix<f64>, what: &str) -> Result<(
 }
 
 /// Checks every keyframe's marginal and the joint marginals of `pairs`,
-/// the engine linearised at `poses`: `H⁻¹` there, each block turned into
-/// the frame of the estimate it is published with.
+/// the engine linearised at `poses` with edge `e`'s information weighed
+/// `weight[e]`: `H⁻¹` there, each block turned into the frame of the
+/// estimate it is published with.
 fn check_engine<P: Numeric>(
     engine: &mut Engine<P>,
     graph: &PoseGraph<P>,
     poses: &[P],
+    weight: &[f64],
     pairs: &[(usize, usize)],
 ) -> Result<(), TestCaseError> {
     let d = P::D;
-    let sigma = dense_covariance(graph, poses);
+    let sigma = dense_covariance(graph, poses, weight);
     let estimate: Vec<P> = engine.snapshot().poses().map(|(_, p)| p).collect();
     prop_assert_eq!(estimate.len(), poses.len());
     let turn: Vec<DMatrix<f64>> = poses.iter().zip(&estimate).map(|(l, e)| P::turn(l, e)).collect();
@@ -253,6 +257,21 @@ fn information3(w: [f64; 3]) -> Information6 {
     Information6::from_upper(u).expect("positive definite")
 }
 
+/// The map of `graph` at `poses` with each loop closure's switch taken
+/// from `switches` (odometry is never switched), and the weight `s²` each
+/// edge's information then carries.
+fn switched<P: Numeric>(graph: &PoseGraph<P>, poses: &[P], switches: &[f64]) -> (MapFile<P>, Vec<f64>) {
+    let mut map = MapFile::solved(graph, poses);
+    let mut weight = Vec::new();
+    for (e, edge) in map.edges.iter_mut().enumerate() {
+        if edge.edge.kind != EdgeKind::Odometry {
+            edge.switch = switches[e];
+        }
+        weight.push(edge.switch * edge.switch);
+    }
+    (map, weight)
+}
+
 /// Streams `graph` keyframe by keyframe with one update each.
 fn stream<P: Numeric>(graph: &PoseGraph<P>) -> Engine<P> {
     let mut engine = Engine::<P>::create(config());
@@ -289,17 +308,19 @@ proptest! {
         noise in prop::collection::vec(step2(), 60),
         weights in prop::collection::vec([0.0..1.0f64, 0.0..1.0, 0.0..1.0], 60),
         pairs in prop::collection::vec((0usize..12, 0usize..12), 3),
+        switches in prop::collection::vec(0.3..1.0f64, 60),
     ) {
         let truth = walk2(&steps);
         let (g, _) = graph_of(&truth, &loops, |e, t| {
             let n = noise[e];
             (t.compose(&Pose2::new(0.05 * n[0], 0.05 * n[1], 0.02 * n[2])), information2(weights[e]))
         });
-        let mut engine = Engine::restore(config(), &MapFile::solved(&g, &truth), false)
+        let (map, weight) = switched(&g, &truth, &switches);
+        let mut engine = Engine::restore(config(), &map, false)
             .map_err(|e| TestCaseError::fail(e.to_string()))?;
         let n = truth.len();
         let pairs: Vec<_> = pairs.iter().map(|&(a, b)| (a % n, b % n)).collect();
-        check_engine(&mut engine, &g, &truth, &pairs)?;
+        check_engine(&mut engine, &g, &truth, &weight, &pairs)?;
     }
 
     /// Spatial graphs with noisy edges, factorised at the noisy walk.
@@ -310,17 +331,19 @@ proptest! {
         noise in prop::collection::vec(step3(), 60),
         weights in prop::collection::vec([0.0..1.0f64, 0.0..1.0, 0.0..1.0], 60),
         pairs in prop::collection::vec((0usize..12, 0usize..12), 3),
+        switches in prop::collection::vec(0.3..1.0f64, 60),
     ) {
         let truth = walk3(&steps);
         let (g, _) = graph_of(&truth, &loops, |e, t| {
             let n = noise[e].map(|v| 0.02 * v);
             (t.compose(&Pose3::from_xyz_rpy(n)), information3(weights[e]))
         });
-        let mut engine = Engine::restore(config(), &MapFile::solved(&g, &truth), false)
+        let (map, weight) = switched(&g, &truth, &switches);
+        let mut engine = Engine::restore(config(), &map, false)
             .map_err(|e| TestCaseError::fail(e.to_string()))?;
         let n = truth.len();
         let pairs: Vec<_> = pairs.iter().map(|&(a, b)| (a % n, b % n)).collect();
-        check_engine(&mut engine, &g, &truth, &pairs)?;
+        check_engine(&mut engine, &g, &truth, &weight, &pairs)?;
     }
 
     /// Noise-free planar graphs streamed through the incremental factor.
@@ -333,7 +356,8 @@ proptest! {
         let truth = walk2(&steps);
         let (g, pairs) = graph_of(&truth, &loops, |e, t| (*t, information2(weights[e])));
         let mut engine = stream(&g);
-        check_engine(&mut engine, &g, &truth, &pairs)?;
+        let weight = vec![1.0; g.edges().len()];
+        check_engine(&mut engine, &g, &truth, &weight, &pairs)?;
     }
 
     /// Noise-free spatial graphs streamed through the incremental factor.
@@ -346,7 +370,8 @@ proptest! {
         let truth = walk3(&steps);
         let (g, pairs) = graph_of(&truth, &loops, |e, t| (*t, information3(weights[e])));
         let mut engine = stream(&g);
-        check_engine(&mut engine, &g, &truth, &pairs)?;
+        let weight = vec![1.0; g.edges().len()];
+        check_engine(&mut engine, &g, &truth, &weight, &pairs)?;
     }
 }
 
