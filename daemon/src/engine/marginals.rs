@@ -21,6 +21,14 @@ use super::{Engine, EngineError, EnginePose};
 use crate::graph::KeyframeId;
 use nalgebra::DMatrix;
 
+/// The upper triangle of a square `sigma`, row by row (the order the
+/// snapshot header and `slamd solve --covariances` write a covariance in,
+/// g2o's order for information matrices).
+pub fn upper_triangle(sigma: &DMatrix<f64>) -> impl Iterator<Item = f64> + '_ {
+    let n = sigma.nrows();
+    (0..n).flat_map(move |r| (r..n).map(move |c| sigma[(r, c)]))
+}
+
 impl<P: EnginePose> Engine<P> {
     /// The marginal covariance of keyframe `id`'s pose, `DOF` square (3 in
     /// the plane, 6 in space), as of the changes applied so far.

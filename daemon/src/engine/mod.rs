@@ -73,6 +73,7 @@ mod state;
 
 pub use config::EngineConfig;
 pub use error::EngineError;
+pub use marginals::upper_triangle;
 pub use op::{Op, SnapshotSource};
 pub use pose::EnginePose;
 pub use report::{EngineStats, FactorWork, UpdateReport};

@@ -6,7 +6,7 @@ use super::acks::Acks;
 use super::health::Latency;
 use super::held::{Held, Waiting};
 use crate::config::Config;
-use crate::engine::{EdgeInput, Engine, EngineError, EnginePose, FixInput};
+use crate::engine::{upper_triangle, EdgeInput, Engine, EngineError, EnginePose, FixInput};
 use crate::graph::{EdgeKind, GraphError, KeyframeId};
 use crate::outliers::REJECTED_BELOW;
 use crate::store::{Record, StateDir};
@@ -485,13 +485,8 @@ impl<P: EnginePose> EngineLoop<P> {
             }
         };
         let mut upper = [0.0; INFORMATION_UPPER];
-        let n = sigma.nrows();
-        let mut i = 0;
-        for r in 0..n {
-            for c in r..n {
-                upper[i] = sigma[(r, c)];
-                i += 1;
-            }
+        for (slot, v) in upper.iter_mut().zip(upper_triangle(&sigma)) {
+            *slot = v;
         }
         Some((id, upper))
     }

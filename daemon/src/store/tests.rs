@@ -62,9 +62,8 @@ fn an_older_journal_is_rewritten_in_this_format_before_appending() {
     write_journal(&dir, &records);
     let path = dir.join("journal");
     let mut bytes = std::fs::read(&path).unwrap();
-    bytes[8..12].copy_from_slice(&2u32.to_le_bytes());
     let generation = u64::from_le_bytes(bytes[16..24].try_into().unwrap());
-    bytes[12..16].copy_from_slice(&journal::head_crc(journal::MAGIC, 2, generation).to_le_bytes());
+    bytes[..journal::HEAD].copy_from_slice(&old_head(journal::MAGIC, 2, generation));
     std::fs::write(&path, &bytes).unwrap();
     let (mut state, rec) = StateDir::open::<Pose2>(&dir, &StateConfig::default()).unwrap();
     assert_eq!(rec.tail, records);
@@ -299,13 +298,19 @@ fn a_directory_that_cannot_be_written_is_refused_at_start() {
     assert!(err.to_string().contains("cannot create"), "{err}");
 }
 
+/// A file head naming format `version` (`magic | version | crc32c |
+/// generation`), as an older slamd wrote it.
+fn old_head(magic: &[u8; 8], version: u32, generation: u64) -> Vec<u8> {
+    let mut head = magic.to_vec();
+    head.extend_from_slice(&version.to_le_bytes());
+    head.extend_from_slice(&journal::head_crc(magic, version, generation).to_le_bytes());
+    head.extend_from_slice(&generation.to_le_bytes());
+    head
+}
+
 /// A map file of format `version` whose body is `body`.
 fn old_map_file(version: u32, generation: u64, body: &[u8]) -> Vec<u8> {
-    let mut old = Vec::new();
-    old.extend_from_slice(map::MAGIC);
-    old.extend_from_slice(&version.to_le_bytes());
-    old.extend_from_slice(&journal::head_crc(map::MAGIC, version, generation).to_le_bytes());
-    old.extend_from_slice(&generation.to_le_bytes());
+    let mut old = old_head(map::MAGIC, version, generation);
     bytes::frame(&mut old, body);
     old
 }

@@ -2,7 +2,7 @@
 //! at the solution ([`Engine::marginal`]).
 
 use anyhow::Context;
-use slamd::engine::{Engine, EngineConfig, EnginePose};
+use slamd::engine::{upper_triangle, Engine, EngineConfig, EnginePose};
 use slamd::graph::PoseGraph;
 use slamd::store::MapFile;
 use std::io::Write;
@@ -52,11 +52,8 @@ pub fn write<P: EnginePose>(
         total += took;
         most = most.max(took);
         let mut line = k.id.to_string();
-        for r in 0..P::DOF {
-            for c in r..P::DOF {
-                line.push(' ');
-                line.push_str(&format!("{:e}", sigma[(r, c)]));
-            }
+        for v in upper_triangle(&sigma) {
+            line.push_str(&format!(" {v:e}"));
         }
         writeln!(w, "{line}")?;
     }
