@@ -17,7 +17,8 @@ its defaults. Per run:
 - ATE against ground truth next to the outlier-free replay's ATE;
 - chi2 over the true edges (the outlier-free file scored by `slamd eval`)
   relative to the outlier-free optimum;
-- total replay time and p99 latency per keyframe.
+- total replay time, the outlier-free replay's in the same run and their
+  ratio, and p99 and max latency per keyframe.
 
 With --peers, GTSAM runs on the same spoiled files from the odometry
 guess, each under --peer-timeout seconds, and is scored the same way:
@@ -139,9 +140,9 @@ def main():
     args = ap.parse_args()
     tmp = tempfile.mkdtemp(prefix="slamd-outliers-")
     print(f"slamd replay --embedded {' '.join(args.extra)} (filter defaults); seed {args.seed}")
-    print("| dataset | outliers | precision | recall | ATE (m) | ATE clean (m) | χ² true / optimum | total (s) | p99 (ms) |"
+    print("| dataset | outliers | precision | recall | ATE (m) | ATE clean (m) | χ² true / optimum | total (s) | clean (s) | total / clean | p99 (ms) | max (ms) |"
           + (" GNC P / R | GNC ATE (m) | GNC χ² true / optimum | GNC (s) | LM+DCS P / R | LM+DCS ATE (m) | LM+DCS χ² true / optimum | LM+DCS (s) |" if args.peers else ""))
-    print("|---|---|---|---|---|---|---|---|---|" + ("---|" * 8 if args.peers else ""))
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|" + ("---|" * 8 if args.peers else ""))
     for name in args.datasets:
         file, gt = DATASETS[name]
         clean = os.path.join(DATA, file)
@@ -165,7 +166,8 @@ def main():
                 ate = f"{r['ate']:.4f}" if r.get("ate") is not None else "–"
                 ate0 = f"{base['ate']:.4f}" if base.get("ate") is not None else "–"
                 row = (f"| {name} | {count} {kind} | {precision:.3f} | {recall:.3f} | {ate} | {ate0} | "
-                       f"{s['chi2'] / optimum:.3f} | {r['total_s']:.2f} | {r['p99_us'] / 1e3:.1f} |")
+                       f"{s['chi2'] / optimum:.3f} | {r['total_s']:.2f} | {base['total_s']:.2f} | "
+                       f"{r['total_s'] / base['total_s']:.2f} | {r['p99_us'] / 1e3:.1f} | {r['max_us'] / 1e3:.0f} |")
                 for method in ("gnc", "dcs") if args.peers else ():
                     g = peer(spoiled, method, args.peer_timeout)
                     if g is None:
