@@ -492,16 +492,8 @@ mod tests {
     #[test]
     fn a_start_far_above_the_lowest_gets_only_a_look() {
         let edges = square();
-        let problem = Problem {
-            edges: &edges,
-            priors: &[],
-            robust: None,
-            stop: None,
-        };
-        // every pose thrown off, turned and shuffled: far from any basin
-        let start: Vec<Pose2> = (0..8)
-            .map(|k| Pose2::new(10.0 * ((k * 5) % 8) as f64, -3.0 * k as f64, 1.3 * k as f64))
-            .collect();
+        let problem = least_squares(&edges);
+        let start = far_start();
         let probe = LevenbergMarquardtParams {
             max_iterations: PROBE_ITERATIONS,
             ..LevenbergMarquardtParams::default()
@@ -549,15 +541,8 @@ mod tests {
     #[test]
     fn a_start_behind_a_finished_one_gives_up() {
         let edges = square();
-        let problem = Problem {
-            edges: &edges,
-            priors: &[],
-            robust: None,
-            stop: None,
-        };
-        let start: Vec<Pose2> = (0..8)
-            .map(|k| Pose2::new(10.0 * ((k * 5) % 8) as f64, -3.0 * k as f64, 1.3 * k as f64))
-            .collect();
+        let problem = least_squares(&edges);
+        let start = far_start();
         let params = LevenbergMarquardtParams::default();
         let probe = LevenbergMarquardtParams {
             max_iterations: 2,
@@ -612,6 +597,24 @@ mod tests {
         let done = polish();
         assert!((done.poses[7].theta - start[7].theta).abs() > 1e-3);
         assert!(done.cost < stopped.cost, "{} vs {}", done.cost, stopped.cost);
+    }
+
+    /// The plain least-squares problem over `edges`.
+    fn least_squares(edges: &[Edge]) -> Problem<'_, Pose2> {
+        Problem {
+            edges,
+            priors: &[],
+            robust: None,
+            stop: None,
+        }
+    }
+
+    /// Every pose of the square thrown off, turned and shuffled: far from
+    /// any basin.
+    fn far_start() -> Vec<Pose2> {
+        (0..8)
+            .map(|k| Pose2::new(10.0 * ((k * 5) % 8) as f64, -3.0 * k as f64, 1.3 * k as f64))
+            .collect()
     }
 
     /// Odometry composed from the origin.
