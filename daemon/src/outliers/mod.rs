@@ -19,13 +19,12 @@ pub mod consistency;
 pub mod cycles;
 pub mod drift;
 mod robust;
+mod starts;
 
 pub use cycles::{CycleCheck, CycleParams, Verdict};
 pub use drift::DriftRun;
-pub use robust::{
-    robust_polish, RobustEdges, RobustSolution, ABANDON_RATIO, DORMANT_BELOW, LOOK_ITERATIONS,
-    PROBE_ITERATIONS, PRUNE_RATIO,
-};
+pub use robust::{robust_polish, RobustEdges, RobustSolution, DORMANT_BELOW};
+pub use starts::{ABANDON_RATIO, LATE_RATIO, LOOK_ITERATIONS, PROBE_ITERATIONS, PRUNE_RATIO};
 
 use crate::graph::{Edge, EdgeKind};
 use crate::robust::kernel::dcs;
