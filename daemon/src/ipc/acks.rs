@@ -3,7 +3,9 @@
 //!
 //! A frontend numbers its messages 1, 2, 3, … across keyframes, edges and
 //! fixes; the daemon drains the three queues one after another, so
-//! numbers arrive out of order within a batch. Per frontend the daemon
+//! numbers arrive out of order within a batch. A batch ends only when a
+//! pass over the three finds them empty, so it holds every message a
+//! frontend sent before the newest one in it. Per frontend the daemon
 //! keeps `through`, the number up to which every message was taken, and
 //! the numbers taken beyond it. The acknowledgement a snapshot carries is
 //! `through`: a frontend may forget everything up to it. A message whose

@@ -188,28 +188,60 @@ impl Ingress {
         }
     }
 
-    /// Hands every queued message to `on`, keyframes first, then
-    /// [`Wake::Drained`] if there was any.
+    /// Hands every queued message to `on`, then [`Wake::Drained`] if there
+    /// was any (see [`drain_queues`]).
     fn drain(&self, on: &mut impl FnMut(Wake) -> bool) -> Result<(), TransportError> {
-        let mut any = false;
         let rx = |what: &str, e: &dyn std::fmt::Debug| TransportError::other(&format!("receive {what}"), e);
-        while let Some(s) = self.keyframes.receive().map_err(|e| rx("keyframes", &e))? {
-            any = true;
-            on(Wake::Input(Input::Keyframe(*s.payload())));
-        }
-        while let Some(s) = self.edges.receive().map_err(|e| rx("edges", &e))? {
-            any = true;
-            on(Wake::Input(Input::Edge(*s.payload())));
-        }
-        while let Some(s) = self.gps.receive().map_err(|e| rx("gps", &e))? {
-            any = true;
-            on(Wake::Input(Input::Gps(*s.payload())));
-        }
-        if any {
-            on(Wake::Drained);
-        }
-        Ok(())
+        let next = |queue: usize| -> Result<Option<Input>, TransportError> {
+            Ok(match queue {
+                0 => (self.keyframes.receive().map_err(|e| rx("keyframes", &e))?)
+                    .map(|s| Input::Keyframe(*s.payload())),
+                1 => (self.edges.receive().map_err(|e| rx("edges", &e))?).map(|s| Input::Edge(*s.payload())),
+                _ => (self.gps.receive().map_err(|e| rx("gps", &e))?).map(|s| Input::Gps(*s.payload())),
+            })
+        };
+        drain_queues(next, on)
     }
+}
+
+/// Most passes one drain makes: a frontend that publishes faster than the
+/// daemon drains still lets the timer through.
+const MAX_PASSES: usize = 64;
+
+/// Hands what the three input queues hold (`next(0)` keyframes, `next(1)`
+/// edges, `next(2)` fixes) to `on`, in passes until one finds every queue
+/// empty, then [`Wake::Drained`] if there was any.
+///
+/// A frontend numbers its messages across the three queues. One pass can
+/// receive an edge yet miss the keyframe published just before it, if the
+/// keyframe queue was read while still empty; the next pass finds it. So a
+/// batch holds, of a frontend publishing from one thread, every message
+/// sent before the newest one it holds: receiving a sample acquires what
+/// its publisher released, the earlier samples included. The daemon's
+/// rule that a new frontend's count starts at its first batch relies on
+/// this.
+fn drain_queues(
+    mut next: impl FnMut(usize) -> Result<Option<Input>, TransportError>,
+    on: &mut impl FnMut(Wake) -> bool,
+) -> Result<(), TransportError> {
+    let mut any = false;
+    for _ in 0..MAX_PASSES {
+        let mut got = false;
+        for queue in 0..3 {
+            while let Some(m) = next(queue)? {
+                got = true;
+                on(Wake::Input(m));
+            }
+        }
+        if !got {
+            break;
+        }
+        any = true;
+    }
+    if any {
+        on(Wake::Drained);
+    }
+    Ok(())
 }
 
 /// The daemon's output side: snapshots and rejections.
@@ -342,4 +374,83 @@ where
         .send()
         .map_err(|e| TransportError::other(&format!("send {what}"), e))?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::message::PROTOCOL_VERSION;
+    use std::collections::VecDeque;
+
+    fn keyframe(sequence: u64) -> Input {
+        Input::Keyframe(Keyframe {
+            id: sequence,
+            timestamp_ns: 0,
+            guess: [0.0; crate::message::POSE_PARAMS],
+            has_guess: 0,
+            frontend: 1,
+            sequence,
+            protocol: PROTOCOL_VERSION,
+            dimension: 2,
+        })
+    }
+
+    fn edge(sequence: u64) -> Input {
+        Input::Edge(Edge {
+            from: 1,
+            to: 2,
+            measurement: [0.0; crate::message::POSE_PARAMS],
+            information: [0.0; crate::message::INFORMATION_UPPER],
+            kind: 0,
+            frontend: 1,
+            sequence,
+            protocol: PROTOCOL_VERSION,
+            dimension: 2,
+        })
+    }
+
+    fn sequence(w: &Wake) -> Option<u64> {
+        match w {
+            Wake::Input(Input::Keyframe(k)) => Some(k.sequence),
+            Wake::Input(Input::Edge(e)) => Some(e.sequence),
+            Wake::Input(Input::Gps(g)) => Some(g.sequence),
+            _ => None,
+        }
+    }
+
+    #[test]
+    fn a_keyframe_published_before_a_received_edge_is_in_the_same_batch() {
+        // the frontend publishes keyframes 1 and 2 and edge 3 after the
+        // keyframe queue was read empty, before the edge queue is read
+        let mut queues: [VecDeque<Input>; 3] = Default::default();
+        let mut reads = 0;
+        let next = |q: usize| {
+            reads += 1;
+            if reads == 2 {
+                queues[0].extend([keyframe(1), keyframe(2)]);
+                queues[1].push_back(edge(3));
+            }
+            Ok(queues[q].pop_front())
+        };
+        let mut wakes = Vec::new();
+        drain_queues(next, &mut |w| {
+            wakes.push(w);
+            true
+        })
+        .unwrap();
+        let order: Vec<Option<u64>> = wakes.iter().map(sequence).collect();
+        assert_eq!(order, [Some(3), Some(1), Some(2), None]);
+        assert_eq!(wakes.last(), Some(&Wake::Drained));
+    }
+
+    #[test]
+    fn empty_queues_hand_over_nothing() {
+        let mut wakes = Vec::new();
+        drain_queues(|_| Ok(None), &mut |w| {
+            wakes.push(w);
+            true
+        })
+        .unwrap();
+        assert!(wakes.is_empty());
+    }
 }
