@@ -142,6 +142,10 @@ impl<P: EnginePose> Drop for Job<P> {
 /// Passes over the queued ops a re-solve makes before handing over.
 const CATCH_UP_PASSES: usize = 3;
 
+/// A catch-up pass that replayed this many ops refactorises with a fresh
+/// ordering before the next one ([`State::reordered`]).
+const REORDER_AFTER: usize = 256;
+
 /// Builds the fresh state and catches up (also used inline, with no ops).
 /// `None` when `stop` was set before the factorisation.
 pub fn run<P: EnginePose>(
@@ -175,14 +179,23 @@ pub fn run<P: EnginePose>(
             if queued == 0 {
                 break;
             }
+            let mut pass = 0;
             for forward in ops.try_iter().take(queued) {
                 match forward {
                     Forward::Op(seq, op) => {
                         let _ = s.replay(&op, config.wildfire_threshold);
                         last_seq = Some(seq);
-                        replayed += 1;
+                        pass += 1;
                     }
                     Forward::Estimate(k, pose) => s.hint(k, pose),
+                }
+            }
+            replayed += pass;
+            // the keyframes a long pass appended fill the factor in for
+            // every later op, here and in the foreground after the swap
+            if pass >= REORDER_AFTER {
+                if let Ok(fresh) = s.reordered(config) {
+                    s = fresh;
                 }
             }
         }
