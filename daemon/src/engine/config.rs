@@ -23,7 +23,8 @@ pub struct EngineConfig {
     /// Gauss–Newton iteration; 0: never). Default 50.
     pub refresh_every_edges: usize,
     /// Re-solve when the factor holds this many times the entries it had
-    /// after the last re-solve (0: never on fill). Default 2.
+    /// when last fresh; while a re-solve runs, refactorise inline with a
+    /// fresh ordering instead (0: neither). Default 2.
     pub resolve_fill_ratio: f64,
     /// Run re-solves on a background thread; else inline, blocking.
     /// Default true.

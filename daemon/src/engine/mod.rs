@@ -240,6 +240,11 @@ impl<P: EnginePose> Engine<P> {
             );
             moved = self.resolve_inline(Polish::Inline);
             resolved = true;
+        } else if self.background.running() && self.schedule.filled(&self.config, &self.state) {
+            // no refresh lands while a re-solve holds the background
+            // thread, and the keyframes appended meanwhile fill the
+            // factor in
+            self.reorder_inline();
         }
         self.background.forward_estimates(&self.state);
         self.version += 1;
@@ -443,6 +448,20 @@ impl<P: EnginePose> Engine<P> {
     /// Rebuilds the state here, polished as `polish` says. Only a polish
     /// restarts the re-solve schedule and the fill baseline; a
     /// relinearisation or a recovery ([`Polish::None`]) leaves them.
+    /// Refactorises with a fresh ordering at the same linearisation
+    /// point ([`State::reordered`]), inline.
+    fn reorder_inline(&mut self) {
+        match self.state.reordered(&self.config) {
+            Ok(state) => {
+                self.stats.reorders += 1;
+                let base = state.work();
+                self.replace_state(state, base);
+                self.schedule.fresh(&self.state);
+            }
+            Err(e) => tracing::warn!(error = %e, "Reordering failed; keeping the current factor."),
+        }
+    }
+
     fn rebuild_inline(&mut self, polish: Polish) {
         let (model, start) = (self.state.model().clone(), self.state.estimate());
         match rebuild::rebuild(model, start, polish, &self.config) {

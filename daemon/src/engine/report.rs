@@ -55,6 +55,9 @@ pub struct EngineStats {
     pub recoveries: usize,
     /// Inline relinearisations (`relinearise_ratio`).
     pub relinearisations: usize,
+    /// Inline refactorisations with a fresh ordering, while a re-solve
+    /// held the background thread and the factor filled in.
+    pub reorders: usize,
     /// Inline re-solves forced by the nonlinearity check.
     pub nonlinear_resolves: usize,
     /// Inline re-solves forced by a run of agreeing loop closures switched

@@ -39,14 +39,21 @@ impl Schedule {
     pub fn resolve_due<P: EnginePose>(&self, config: &EngineConfig, state: &State<P>) -> bool {
         let c = config;
         let by_count = c.resolve_every_edges > 0 && self.edges_since_resolve >= c.resolve_every_edges;
-        let by_fill = c.resolve_fill_ratio > 0.0
-            && self.nnz_after_resolve > 0
-            && state.factor_nnz() as f64 > c.resolve_fill_ratio * self.nnz_after_resolve as f64;
+        let by_fill = self.filled(config, state);
         // the count of fixes on joined keyframes is a scan, so it waits
         // until all fixes together could pass
         let due = |fixes: usize| fixes >= 2 && fixes >= 2 * self.fixes_at_resolve.max(1);
         let by_gps = due(state.model.fixes.len()) && due(state.usable_fixes());
         by_count || by_fill || by_gps
+    }
+
+    /// Whether `state`'s factor has grown `resolve_fill_ratio` times past
+    /// its size when it was last fresh.
+    pub fn filled<P: EnginePose>(&self, config: &EngineConfig, state: &State<P>) -> bool {
+        let ratio = config.resolve_fill_ratio;
+        ratio > 0.0
+            && self.nnz_after_resolve > 0
+            && state.factor_nnz() as f64 > ratio * self.nnz_after_resolve as f64
     }
 
     /// Whether a refresh is due (with the background thread free).

@@ -90,6 +90,7 @@ impl Report {
             "engine": self.engine.map(|s| serde_json::json!({
                 "refreshes": s.refreshes,
                 "relinearisations": s.relinearisations,
+                "reorders": s.reorders,
                 "nonlinear_resolves": s.nonlinear_resolves,
                 "drift_resolves": s.drift_resolves,
                 "recoveries": s.recoveries,
