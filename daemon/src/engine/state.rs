@@ -512,9 +512,9 @@ pub(super) mod tests {
     }
 
     /// A ring of keyframes with a loop closure back `span` keyframes from
-    /// each, every measurement exact, replayed as a catch-up: the
-    /// reordered state solves to the same estimate with fewer factor
-    /// entries than the state that appended each keyframe to the ordering.
+    /// each, every measurement exact, replayed op by op: the reordered
+    /// state solves to the same estimate with fewer factor entries than
+    /// the state that appended each keyframe to the ordering.
     #[test]
     fn a_reordered_state_solves_the_same_system_with_less_fill() {
         let (n, span) = (120, 30);
