@@ -511,66 +511,6 @@ pub(super) mod tests {
         (a.x - b.x).abs() < 1e-12 && (a.y - b.y).abs() < 1e-12 && (a.theta - b.theta).abs() < 1e-12
     }
 
-    /// A ring of keyframes with a loop closure back `span` keyframes from
-    /// each, every measurement exact, replayed op by op: the reordered
-    /// state solves to the same estimate with fewer factor entries than
-    /// the state that appended each keyframe to the ordering.
-    #[test]
-    fn a_reordered_state_solves_the_same_system_with_less_fill() {
-        let (n, span) = (120, 30);
-        let truth: Vec<Pose2> = (0..n)
-            .map(|k| {
-                let a = k as f64 * std::f64::consts::TAU / n as f64;
-                Pose2::new(10.0 * a.cos(), 10.0 * a.sin(), a + 0.5)
-            })
-            .collect();
-        let between = |i: usize, j: usize| truth[i].inverse().compose(&truth[j]);
-        let config = EngineConfig::default();
-        let mut state = State::new(&config);
-        for k in 0..n {
-            state.replay(&keyframe(k as KeyframeId), 0.0).unwrap();
-            if k > 0 {
-                state
-                    .replay(
-                        &odometry(k as KeyframeId - 1, k as KeyframeId, between(k - 1, k)),
-                        0.0,
-                    )
-                    .unwrap();
-            }
-            if k >= span {
-                let z = between(k - span, k);
-                let closure = EdgeInput::new(
-                    (k - span) as KeyframeId,
-                    k as KeyframeId,
-                    z,
-                    Information::identity(),
-                    EdgeKind::LoopClosure,
-                );
-                state.replay(&Op::Edge(closure), 0.0).unwrap();
-            }
-        }
-        state.solve(0.0).unwrap();
-        let mut fresh = state.reordered(&config).unwrap();
-        fresh.solve(0.0).unwrap();
-        assert!(
-            fresh.factor_nnz() < state.factor_nnz(),
-            "{} entries reordered, {} appended",
-            fresh.factor_nnz(),
-            state.factor_nnz()
-        );
-        for k in 0..n {
-            let (a, b) = (state.estimate()[k], fresh.estimate()[k]);
-            assert!(close(a, b), "keyframe {k}: {a:?} against {b:?}");
-            // exact measurements: both are the world itself, up to the gauge
-            let g = truth[0].inverse().compose(&truth[k]);
-            assert!(
-                (a.x - g.x).abs() < 1e-9 && (a.y - g.y).abs() < 1e-9,
-                "keyframe {k}"
-            );
-        }
-        assert!(fresh.chi2() < 1e-18);
-    }
-
     /// A caught-up keyframe joins at its anchor moved by the foreground's
     /// relative pose `F_m⁻¹ F_k`; without a hint, dead-reckoned.
     #[test]
