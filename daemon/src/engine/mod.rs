@@ -445,9 +445,6 @@ impl<P: EnginePose> Engine<P> {
         true
     }
 
-    /// Rebuilds the state here, polished as `polish` says. Only a polish
-    /// restarts the re-solve schedule and the fill baseline; a
-    /// relinearisation or a recovery ([`Polish::None`]) leaves them.
     /// Refactorises with a fresh ordering at the same linearisation
     /// point ([`State::reordered`]), inline.
     fn reorder_inline(&mut self) {
@@ -462,6 +459,9 @@ impl<P: EnginePose> Engine<P> {
         }
     }
 
+    /// Rebuilds the state here, polished as `polish` says. Only a polish
+    /// restarts the re-solve schedule and the fill baseline; a
+    /// relinearisation or a recovery ([`Polish::None`]) leaves them.
     fn rebuild_inline(&mut self, polish: Polish) {
         let (model, start) = (self.state.model().clone(), self.state.estimate());
         match rebuild::rebuild(model, start, polish, &self.config) {
