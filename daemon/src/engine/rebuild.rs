@@ -98,7 +98,7 @@ mod tests {
     use crate::engine::state::tests::{keyframe, odometry};
     use crate::engine::{EdgeInput, Op};
     use crate::geometry::Pose2;
-    use crate::graph::{EdgeKind, Information};
+    use crate::graph::{EdgeKind, Information, KeyframeId};
     use crate::outliers::{OutlierConfig, OFF_BELOW};
 
     /// Six keyframes 1 m apart along x, then two loop closures from 0 to
@@ -223,17 +223,11 @@ mod tests {
         let config = EngineConfig::default();
         let mut state = State::new(&config);
         for k in 0..n {
-            state
-                .replay(&keyframe(k as crate::graph::KeyframeId), 0.0)
-                .unwrap();
+            state.replay(&keyframe(k as KeyframeId), 0.0).unwrap();
             if k > 0 {
                 state
                     .replay(
-                        &odometry(
-                            k as crate::graph::KeyframeId - 1,
-                            k as crate::graph::KeyframeId,
-                            between(k - 1, k),
-                        ),
+                        &odometry(k as KeyframeId - 1, k as KeyframeId, between(k - 1, k)),
                         0.0,
                     )
                     .unwrap();
@@ -241,8 +235,8 @@ mod tests {
             if k >= span {
                 let z = between(k - span, k);
                 let closure = EdgeInput::new(
-                    (k - span) as crate::graph::KeyframeId,
-                    k as crate::graph::KeyframeId,
+                    (k - span) as KeyframeId,
+                    k as KeyframeId,
                     z,
                     Information::identity(),
                     EdgeKind::LoopClosure,
