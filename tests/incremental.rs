@@ -341,42 +341,56 @@ fn bad_changes_are_refused_and_leave_nothing_behind() {
     assert!((p.x - 1.0).abs() < 1e-12);
 }
 
-#[test]
-fn the_closing_resolve_polishes_what_arrived_after_a_background_resolve() {
-    let g = read("manhattanolson3500_g2oversion.g2o").prefix(600);
-    let mut config = EngineConfig {
-        resolve_every_edges: 0,
-        resolve_fill_ratio: 0.0,
-        nonlinear_ratio: 0.0,
-        ..EngineConfig::default()
-    };
+/// Streams `g` into an engine with `config` (the filter off), starting a
+/// background re-solve just before keyframe `at` and then sleeping
+/// `pause_ms`; updates after each keyframe below `update_below`. The
+/// closing re-solve must then reach the batch optimum to 1e-6.
+fn close_after_a_resolve_at(
+    g: &PoseGraph,
+    mut config: EngineConfig,
+    at: usize,
+    pause_ms: u64,
+    update_below: usize,
+) -> Engine {
     config.outliers.enabled = false;
     let mut engine = Engine::new(config);
-    let groups = g.by_newer();
-    for (k, group) in groups.iter().enumerate() {
-        if k == 450 {
-            // a background re-solve that has drained its queue before the
-            // last keyframes arrive: they reach it only through the
-            // foreground's replay at the swap
+    for (k, group) in g.by_newer().iter().enumerate() {
+        if k == at {
             engine.idle();
             assert!(engine.resolving());
-            std::thread::sleep(std::time::Duration::from_millis(400));
+            std::thread::sleep(std::time::Duration::from_millis(pause_ms));
         }
         engine.add_keyframe(g.id_of(k), None).unwrap();
         for &e in group {
             engine.add_edge(g.edge_input(e)).unwrap();
         }
-        if k < 450 {
+        if k < update_below {
             engine.update();
         }
     }
     engine.resolve_now();
-    let best = optimum(&g);
-    let got = chi2(&g, &snapshot_poses(&engine));
+    let best = optimum(g);
+    let got = chi2(g, &snapshot_poses(&engine));
     assert!(
         (got - best).abs() <= 1e-6 * best,
         "χ² {got} after the closing re-solve, optimum {best}"
     );
+    engine
+}
+
+#[test]
+fn the_closing_resolve_polishes_what_arrived_after_a_background_resolve() {
+    // a background re-solve that has drained its queue before the last
+    // keyframes arrive: they reach it only through the foreground's replay
+    // at the swap
+    let config = EngineConfig {
+        resolve_every_edges: 0,
+        resolve_fill_ratio: 0.0,
+        nonlinear_ratio: 0.0,
+        ..EngineConfig::default()
+    };
+    let g = read("manhattanolson3500_g2oversion.g2o").prefix(600);
+    close_after_a_resolve_at(&g, config, 450, 400, 450);
 }
 
 /// The worst snapshot-to-prefix-optimum χ² ratio over every 25th of
@@ -420,39 +434,19 @@ fn relinearising_a_stale_linear_model_keeps_snapshots_near_the_optimum() {
 
 #[test]
 fn a_factor_refactorised_while_a_resolve_runs_still_reaches_the_optimum() {
-    let g = read("city10000.g2o").prefix(2600);
-    let mut config = EngineConfig {
+    // any growth while the re-solve runs calls for a fresh ordering, and
+    // a multi-start re-solve of 2,000 keyframes outlasts the foreground's
+    // next keyframes
+    let config = EngineConfig {
         resolve_every_edges: 0,
         refresh_every_edges: 0,
-        // any growth while the re-solve runs calls for a fresh ordering
         resolve_fill_ratio: 1.01,
         ..EngineConfig::default()
     };
-    config.outliers.enabled = false;
-    let mut engine = Engine::new(config);
-    let groups = g.by_newer();
-    for (k, group) in groups.iter().enumerate() {
-        if k == 2000 {
-            // a multi-start re-solve of 2,000 keyframes outlasts the
-            // foreground's next keyframes
-            engine.idle();
-            assert!(engine.resolving());
-        }
-        engine.add_keyframe(g.id_of(k), None).unwrap();
-        for &e in group {
-            engine.add_edge(g.edge_input(e)).unwrap();
-        }
-        engine.update();
-    }
+    let g = read("city10000.g2o").prefix(2600);
+    let engine = close_after_a_resolve_at(&g, config, 2000, 0, usize::MAX);
     assert!(
         engine.stats().reorders > 0,
         "no refactorisation while the re-solve ran"
-    );
-    engine.resolve_now();
-    let best = optimum(&g);
-    let got = chi2(&g, &snapshot_poses(&engine));
-    assert!(
-        (got - best).abs() <= 1e-6 * best,
-        "χ² {got} after the closing re-solve, optimum {best}"
     );
 }
