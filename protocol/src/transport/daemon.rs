@@ -379,34 +379,24 @@ where
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::message::PROTOCOL_VERSION;
+    use crate::codec::{edge_out, keyframe_out, Origin};
+    use slamd_types::{EdgeInput, EdgeKind, Information, Pose2};
     use std::collections::VecDeque;
 
-    fn keyframe(sequence: u64) -> Input {
-        Input::Keyframe(Keyframe {
-            id: sequence,
-            timestamp_ns: 0,
-            guess: [0.0; crate::message::POSE_PARAMS],
-            has_guess: 0,
+    fn from(sequence: u64) -> Origin {
+        Origin {
             frontend: 1,
             sequence,
-            protocol: PROTOCOL_VERSION,
-            dimension: 2,
-        })
+        }
+    }
+
+    fn keyframe(sequence: u64) -> Input {
+        Input::Keyframe(keyframe_out::<Pose2>(sequence, 0, None, from(sequence)))
     }
 
     fn edge(sequence: u64) -> Input {
-        Input::Edge(Edge {
-            from: 1,
-            to: 2,
-            measurement: [0.0; crate::message::POSE_PARAMS],
-            information: [0.0; crate::message::INFORMATION_UPPER],
-            kind: 0,
-            frontend: 1,
-            sequence,
-            protocol: PROTOCOL_VERSION,
-            dimension: 2,
-        })
+        let e = EdgeInput::new(1, 2, Pose2::IDENTITY, Information::identity(), EdgeKind::Odometry);
+        Input::Edge(edge_out(&e, from(sequence)))
     }
 
     fn sequence(w: &Wake) -> Option<u64> {
