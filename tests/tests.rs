@@ -14,3 +14,4 @@ mod outliers;
 mod restore;
 mod spatial;
 mod spatial_daemon;
+mod true_loop_closures;

@@ -1,6 +1,9 @@
 //! Helpers shared by slamd's integration tests and benchmarks: where the
 //! shared datasets live, noise-free synthetic graphs, feeding a graph to
-//! the engine as a frontend would, and a handle on the `slamd` binary.
+//! the engine as a frontend would, a handle on the `slamd` binary, and
+//! the true loop closures the filter holds off ([`held_off`]).
+
+pub mod held_off;
 
 use slamd::engine::{Engine, EngineConfig};
 use slamd::geometry::Pose2;
