@@ -9,7 +9,8 @@ all of *.g2o and *.graph) and for `slamd demo`'s world (`slamd synth
 trusted) and `slamd replay FILE --embedded` (the filter on, as shipped),
 then scores the replay's map against the polish's with `slamd eval`
 (RMSE after the best rigid alignment). Prints one table: loop closures,
-how many the filter ended holding switched off, the RMSE, and both χ².
+how many the filter ended holding switched off, the RMSE, both χ², and
+the replay's time, p99 and longest wait for a keyframe's snapshot.
 The binary is target/release/slamd (build it first) or $SLAMD_BIN.
 """
 import glob, json, os, subprocess, sys, tempfile
@@ -34,8 +35,8 @@ def main():
         files.append(demo)
     print("`python3 benches/clean_data.py`")
     print()
-    print("| file | loop closures | switched off | share | RMSE to the polish (m) | χ² polish | χ² replay |")
-    print("|---|---|---|---|---|---|---|")
+    print("| file | loop closures | switched off | share | RMSE to the polish (m) | χ² polish | χ² replay | replay (s) | p99 (ms) | max (ms) |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     for path in files:
         name = os.path.basename(path)
         polished = os.path.join(tmp, name + ".polish.txt")
@@ -46,7 +47,8 @@ def main():
         share = r["switched_off"] / max(1, r["loop_closures"])
         rmse = e["ate"]
         print(f"| {name} | {r['loop_closures']} | {r['switched_off']} | {100 * share:.2f}% "
-              f"| {rmse:.4f} | {p['chi2']:.3f} | {r['chi2']:.3f} |")
+              f"| {rmse:.4f} | {p['chi2']:.3f} | {r['chi2']:.3f} | {r['total_s']:.2f} "
+              f"| {r['p99_us'] / 1e3:.1f} | {r['max_us'] / 1e3:.0f} |")
     return 0
 
 
