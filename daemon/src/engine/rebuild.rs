@@ -95,7 +95,7 @@ pub fn factorise<P: EnginePose>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::engine::state::tests::{keyframe, odometry};
+    use crate::engine::state::tests::{close, keyframe, odometry};
     use crate::engine::{EdgeInput, Op};
     use crate::geometry::Pose2;
     use crate::graph::{EdgeKind, Information, KeyframeId};
@@ -255,9 +255,7 @@ mod tests {
         );
         for k in 0..n {
             let (a, b) = (state.estimate()[k], fresh.estimate()[k]);
-            let same =
-                (a.x - b.x).abs() < 1e-12 && (a.y - b.y).abs() < 1e-12 && (a.theta - b.theta).abs() < 1e-12;
-            assert!(same, "keyframe {k}: {a:?} against {b:?}");
+            assert!(close(a, b), "keyframe {k}: {a:?} against {b:?}");
             // exact measurements: both are the world itself, up to the gauge
             let g = truth[0].inverse().compose(&truth[k]);
             assert!(

@@ -507,7 +507,8 @@ pub(super) mod tests {
         ))
     }
 
-    fn close(a: Pose2, b: Pose2) -> bool {
+    /// Two poses equal to 1e-12 in every component.
+    pub fn close(a: Pose2, b: Pose2) -> bool {
         (a.x - b.x).abs() < 1e-12 && (a.y - b.y).abs() < 1e-12 && (a.theta - b.theta).abs() < 1e-12
     }
 
