@@ -15,8 +15,8 @@
 
 use slamd::engine::EngineConfig;
 use slamd::robust::DEFAULT_PHI;
-use slamd::synthetic::{generate, WorldParams};
-use slamd_tests::held_off::{held_off, world_with_exact_closure, HeldOff};
+use slamd::synthetic::{generate, World, WorldParams};
+use slamd_tests::held_off::{held_off, with_exact_closure, HeldOff};
 
 const POSES: usize = 300;
 
@@ -29,14 +29,9 @@ fn splitmix(state: &mut u64) -> u64 {
     z ^ (z >> 31)
 }
 
-/// The two keyframes world `seed`'s exact loop closure joins.
-fn pair(seed: u64, any: bool) -> (usize, usize) {
-    let truth = generate(&WorldParams {
-        poses: POSES,
-        seed,
-        ..WorldParams::default()
-    })
-    .truth;
+/// The two keyframes `world`'s (seed `seed`) exact loop closure joins.
+fn pair(world: &World, seed: u64, any: bool) -> (usize, usize) {
+    let truth = &world.truth;
     let mut state = seed;
     loop {
         let a = (splitmix(&mut state) % POSES as u64) as usize;
@@ -62,8 +57,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let (mut alone, mut together) = (Vec::<HeldOff>::new(), Vec::<HeldOff>::new());
     let (mut touched, mut exact) = (0, 0);
     for seed in 0..worlds {
-        let (a, b) = pair(seed, any);
-        let g = world_with_exact_closure(POSES, seed, a, b);
+        let world = generate(&WorldParams {
+            poses: POSES,
+            seed,
+            ..WorldParams::default()
+        });
+        let (a, b) = pair(&world, seed, any);
+        let g = with_exact_closure(world, a, b);
         let off = held_off(&g, config.clone());
         touched += usize::from(!off.is_empty());
         exact += off.iter().filter(|h| h.edge == g.edges().len() - 1).count();

@@ -11,7 +11,6 @@ use slamd::engine::{EdgeInput, Engine, EngineConfig, EngineError, FactorWork, Sn
 use slamd::geometry::Pose2;
 use slamd::graph::{chi2, EdgeKind, GraphError, Information, Keyframe, PoseGraph};
 use slamd::linear::two_stage::{self, PositionWeights};
-use slamd::solver::{solve_batch, BatchOptions};
 use slamd_tests::{max_pose_error, noise_free, read, relative_pose_error, replay};
 
 /// An engine that never re-solves on its own and keeps the linear stages.
@@ -148,11 +147,7 @@ fn incremental_two_stage_equals_batch_on_dataset_prefixes() {
 
 /// χ² of the batch optimum of `g` (two-stage start, polished).
 fn optimum(g: &PoseGraph) -> f64 {
-    let options = BatchOptions {
-        polish: true,
-        ..Default::default()
-    };
-    solve_batch(g, &options).expect("a connected graph").chi2
+    slamd_tests::optimum(g).chi2
 }
 
 fn snapshot_poses(engine: &Engine) -> Vec<Pose2> {

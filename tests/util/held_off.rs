@@ -8,11 +8,11 @@
 //! two ends loosely it bends to fit, and the residual left on the loop
 //! closure is small while the bending costs the rest of the graph.
 
+use crate::optimum;
 use slamd::engine::EngineConfig;
 use slamd::graph::{edge_chi2, EdgeKind, PoseGraph};
 use slamd::outliers::REJECTED_BELOW;
-use slamd::solver::{solve_batch, BatchOptions, BatchSolution};
-use slamd::synthetic::{generate, WorldParams};
+use slamd::synthetic::{generate, World, WorldParams};
 
 /// A loop closure switched off at the end of a stream.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -27,13 +27,20 @@ pub struct HeldOff {
 
 /// `slamd synth`'s world of `poses` keyframes and `seed`, with one more
 /// loop closure between keyframes `a` and `b` measured exactly from the
-/// ground truth, with the world's information. `a` and `b` must differ.
+/// ground truth ([`with_exact_closure`]).
 pub fn world_with_exact_closure(poses: usize, seed: u64, a: usize, b: usize) -> PoseGraph {
     let world = generate(&WorldParams {
         poses,
         seed,
         ..WorldParams::default()
     });
+    with_exact_closure(world, a, b)
+}
+
+/// `world`'s graph with one more loop closure between keyframes `a` and
+/// `b` (which must differ) measured exactly from its ground truth, with
+/// the world's information.
+pub fn with_exact_closure(world: World, a: usize, b: usize) -> PoseGraph {
     let mut g = world.graph;
     let info = g.edges()[0].information; // every edge of the world has it
     let (i, j) = (a.min(b), a.max(b));
@@ -54,15 +61,6 @@ pub fn switched_off(g: &PoseGraph, config: EngineConfig) -> Vec<usize> {
         .filter(|&(&e, &s)| g.edges()[e].kind == EdgeKind::LoopClosure && s < REJECTED_BELOW)
         .map(|(&e, _)| e)
         .collect()
-}
-
-/// The least-squares optimum of `g`.
-pub fn optimum(g: &PoseGraph) -> BatchSolution {
-    let options = BatchOptions {
-        polish: true,
-        ..Default::default()
-    };
-    solve_batch(g, &options).expect("a connected graph")
 }
 
 /// `g` without edge `e`.

@@ -8,6 +8,7 @@ pub mod held_off;
 use slamd::engine::{Engine, EngineConfig};
 use slamd::geometry::Pose2;
 use slamd::graph::{EdgeKind, Information, PoseGraph};
+use slamd::solver::{solve_batch, BatchOptions, BatchSolution};
 use std::path::PathBuf;
 use std::process::Command;
 use std::sync::OnceLock;
@@ -40,6 +41,15 @@ pub fn dataset(name: &str) -> PathBuf {
 /// Reads a shared dataset.
 pub fn read(name: &str) -> PoseGraph {
     slamd::io::read_graph(&dataset(name)).unwrap_or_else(|e| panic!("{e}"))
+}
+
+/// The least-squares optimum of `g`: the two-stage solution, polished.
+pub fn optimum(g: &PoseGraph) -> BatchSolution {
+    let options = BatchOptions {
+        polish: true,
+        ..Default::default()
+    };
+    solve_batch(g, &options).expect("a connected graph")
 }
 
 /// A graph whose every edge is the exact relative pose between `truth`
