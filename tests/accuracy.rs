@@ -21,7 +21,7 @@ const OPTIMA: [(&str, f64); 7] = [
     ("city10000.g2o", 511.985),
     ("intel_sesync.g2o", 45.005),
     ("input_intel_g2o.g2o", 215.830),
-    ("mit_killian.g2o", 39.880),
+    ("mit_killian.g2o", 41.163),
     ("ring.g2o", 11.163),
     ("ringcity.g2o", 262.818),
 ];

@@ -226,8 +226,9 @@ fn solve_eval_and_replay_read_3d_graphs() {
         (Some("3d"), Some(125), Some(297))
     );
     let chi2 = v["chi2"].as_f64().expect("chi2");
-    // GTSAM's LM from its chordal initialisation scores 532.076 here
-    assert!(chi2 < 532.0 && chi2 > 500.0, "{chi2}");
+    // GTSAM's LM from its chordal initialisation, the edges as written,
+    // scores 458.2 under g2o's cost (benches/as_written.py)
+    assert!(chi2 <= 458.2 && chi2 > 450.0, "{chi2}");
     let e = run_json(&["eval", file, out_s, "--json"]);
     let _ = std::fs::remove_file(&out);
     let scored = e["chi2"].as_f64().expect("chi2");

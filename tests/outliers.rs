@@ -123,9 +123,9 @@ fn a_loop_closure_rejected_on_arrival_is_restored_by_the_re_solve() {
     }
     // the loop closure is exact, but the drifted estimate disagrees with it
     let close = EdgeInput::new(
-        40,
         0,
-        truth[40].between(&truth[0]),
+        40,
+        truth[0].between(&truth[40]),
         Information::identity().scaled(10.0),
         EdgeKind::LoopClosure,
     );

@@ -4,6 +4,7 @@ mod accuracy;
 mod cli;
 mod daemon;
 mod durable;
+mod edge_direction;
 mod formulations;
 mod fuzz;
 mod gps;

@@ -12,8 +12,7 @@ use std::path::PathBuf;
 
 /// A pose graph read from a file: keyframes and edges, 2-D or 3-D.
 ///
-/// Edges are as slamd holds them (an edge written newer-id first is
-/// inverted, its information kept). Poses are rows `(x, y, theta)` in 2-D
+/// Edges are as the file wrote them, whichever keyframe is newer. Poses are rows `(x, y, theta)` in 2-D
 /// and `(x, y, z, qx, qy, qz, qw)` in 3-D; information rows the upper
 /// triangle in g2o order (6 or 21 numbers).
 #[pyclass(module = "slamd", frozen)]

@@ -37,17 +37,6 @@ impl Edge {
 }
 
 impl<P: RigidMotion> Edge<P> {
-    /// The edge written the other way, `(j, i, T_ij⁻¹)`, information kept.
-    pub fn reversed(&self) -> Self {
-        Self {
-            from: self.to,
-            to: self.from,
-            measurement: self.measurement.inverse(),
-            information: self.information,
-            kind: self.kind,
-        }
-    }
-
     /// The newer keyframe index, `max(i, j)`: when the edge becomes available
     /// to an online solver.
     pub fn newer(&self) -> usize {

@@ -147,10 +147,11 @@ impl<P: RigidMotion> PoseGraph<P> {
 
     /// Appends an edge between two existing keyframes and returns its index.
     ///
-    /// An edge written newer-id-first (`from > to`) is stored inverted,
-    /// `(to, from, T⁻¹)`, with the same information: the convention under
-    /// which the published optima of such files are computed (MIT Killian:
-    /// 39.880 inverted, 41.163 as written).
+    /// The edge is kept as written, whichever keyframe is newer: its error
+    /// is `t2v(T_ij⁻¹ T_i⁻¹ T_j)` with Ω in that error's frame, as g2o and
+    /// GTSAM read it. Writing it the other way, `(j, i, T_ij⁻¹)`, changes
+    /// the error to `−Ad(T_ij) e` to first order, so the same Ω there would
+    /// be another noise model (docs/design.md, "Edge direction").
     pub fn add_edge(
         &mut self,
         from: KeyframeId,
@@ -167,14 +168,13 @@ impl<P: RigidMotion> PoseGraph<P> {
         }
         let i = self.index_of(from).ok_or(GraphError::UnknownKeyframe(from))?;
         let j = self.index_of(to).ok_or(GraphError::UnknownKeyframe(to))?;
-        let edge = Edge {
+        self.edges.push(Edge {
             from: i,
             to: j,
             measurement,
             information,
             kind,
-        };
-        self.edges.push(if from > to { edge.reversed() } else { edge });
+        });
         Ok(self.edges.len() - 1)
     }
 

@@ -481,10 +481,10 @@ mod tests {
         )
         .unwrap();
         assert_eq!(g.len(), 3);
-        // newer-id-first: stored inverted
+        // newer-id-first: kept as written
         let e = g.edges()[1];
-        assert_eq!((e.from, e.to), (1, 2));
-        assert_eq!(e.measurement, crate::geometry::Pose2::new(-1.0, 0.0, 0.0));
+        assert_eq!((e.from, e.to), (2, 1));
+        assert_eq!(e.measurement, crate::geometry::Pose2::new(1.0, 0.0, 0.0));
     }
 
     #[test]
