@@ -128,7 +128,7 @@ pub fn read<P: RigidMotion>(path: &Path) -> Result<Option<Contents<P>>, StoreErr
         let reason = match unframe(&bytes[at..]) {
             Framed::Whole(payload, used) => match Record::decode(payload) {
                 Ok(r) => {
-                    records.push(r);
+                    records.push(r.of_version(version));
                     at += used;
                     continue;
                 }

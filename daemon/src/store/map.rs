@@ -27,7 +27,7 @@
 
 use super::bytes::{frame, unframe, Framed, Get, Put};
 use super::journal::{check_head, head, HEAD};
-use super::record::{get_edge, get_fix, get_pose, put_edge, put_fix, put_pose, Record};
+use super::record::{edge_of_version, get_edge, get_fix, get_pose, put_edge, put_fix, put_pose, Record};
 use super::StoreError;
 use crate::gps::Georef;
 use crate::graph::{GraphError, PoseGraph};
@@ -313,7 +313,7 @@ fn decode_body<P: RigidMotion>(body: &[u8], generation: u64, version: u32) -> Re
         });
     }
     for _ in 0..g.count(17 + pose_bytes + 8 * P::Information::UPPER + 28)? {
-        let edge = get_edge(&mut g)?;
+        let edge = edge_of_version(get_edge(&mut g)?, version);
         let scale = g.f64()?;
         let switch = g.f64()?;
         if !(scale.is_finite() && scale >= 0.0 && (0.0..=1.0).contains(&switch)) {
@@ -373,7 +373,7 @@ fn decode_body<P: RigidMotion>(body: &[u8], generation: u64, version: u32) -> Re
         for _ in 0..len {
             bytes.push(g.u8()?);
         }
-        map.held.push(Record::decode(&bytes)?);
+        map.held.push(Record::decode(&bytes)?.of_version(version));
     }
     if version >= 2 {
         let up = g.f64()?;

@@ -39,8 +39,10 @@ use std::time::Duration;
 /// 3-D maps: its map body starts with the dimension (version 1 maps are
 /// 2-D), and 3-D journal records have tags of their own. Version 3 added
 /// keyframe timestamps: journal records of their own for a keyframe with
-/// one, and one `u64` per keyframe at the end of the map body.
-pub const FORMAT_VERSION: u32 = 3;
+/// one, and one `u64` per keyframe at the end of the map body. Version 4
+/// keeps every edge as written; an older file's newer-id-first edges are
+/// read in the meaning slamd gave them then (`record::edge_of_version`).
+pub const FORMAT_VERSION: u32 = 4;
 
 /// The oldest format version this slamd reads.
 pub const OLDEST_FORMAT: u32 = 1;

@@ -146,6 +146,38 @@ impl<P: RigidMotion> Record<P> {
 
 /// `keyframe, lat, lon, height, covariance` (without the height's
 /// variance).
+/// The first format version whose edges mean what their writer wrote.
+pub(super) const AS_WRITTEN: u32 = 4;
+
+/// An edge read from a file of format `version`, in the meaning the
+/// daemon that wrote the file gave it. Before [`AS_WRITTEN`] slamd turned
+/// an edge written newer-id-first, `(i, j, Z, Ω)` with `i > j`, into
+/// `(j, i, Z⁻¹, Ω)`, information kept, and solved that; such an edge is
+/// turned the same way here, so that an old journal or map goes on
+/// meaning the graph it was solved as. Every other edge is unchanged.
+pub(super) fn edge_of_version<P: RigidMotion>(e: EdgeInput<P>, version: u32) -> EdgeInput<P> {
+    if version >= AS_WRITTEN || e.from < e.to {
+        return e;
+    }
+    EdgeInput {
+        from: e.to,
+        to: e.from,
+        measurement: e.measurement.inverse(),
+        ..e
+    }
+}
+
+impl<P: RigidMotion> Record<P> {
+    /// The record read from a file of format `version`, in this version's
+    /// meaning ([`edge_of_version`]).
+    pub(super) fn of_version(self, version: u32) -> Self {
+        match self {
+            Record::Edge(o, e) => Record::Edge(o, edge_of_version(e, version)),
+            r => r,
+        }
+    }
+}
+
 pub(super) fn put_fix(p: &mut Put, f: &FixInput) {
     p.u64(f.keyframe);
     p.f64s(&[f.position.lat, f.position.lon, f.position.height]);

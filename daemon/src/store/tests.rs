@@ -80,6 +80,54 @@ fn an_older_journal_is_rewritten_in_this_format_before_appending() {
     assert_eq!(back.records.last(), Some(&stamped));
 }
 
+/// A loop closure written newer-id-first, with anisotropic information.
+fn newer_first_loop_closure(s: u64) -> Record {
+    let info = Information::from_upper([1e4, 0.0, 0.0, 1.0, 0.0, 50.0]).unwrap();
+    let z = Pose2::new(-4.0, 1.0, -std::f64::consts::FRAC_PI_2);
+    Record::Edge(origin(s), EdgeInput::new(5, 1, z, info, EdgeKind::LoopClosure))
+}
+
+/// Until format version 4 slamd solved an edge written newer-id-first,
+/// `(i, j, Z, Ω)`, as `(j, i, Z⁻¹, Ω)`. An older journal goes on meaning
+/// that graph: its newer-first edges are read turned, and the rewrite
+/// keeps them so; a journal of this version keeps them as written.
+#[test]
+fn an_older_journal_keeps_the_meaning_it_was_solved_with() {
+    let dir = temp_dir("edge-meaning");
+    let mut records = stream(6);
+    records.push(newer_first_loop_closure(100));
+    write_journal(&dir, &records);
+    let path = dir.join("journal");
+    let (_, rec) = StateDir::open::<Pose2>(&dir, &StateConfig::default()).unwrap();
+    assert_eq!(rec.tail, records, "this version's journal keeps edges as written");
+    drop(rec);
+    let mut bytes = std::fs::read(&path).unwrap();
+    let generation = u64::from_le_bytes(bytes[16..24].try_into().unwrap());
+    bytes[..journal::HEAD].copy_from_slice(&old_head(journal::MAGIC, 3, generation));
+    std::fs::write(&path, &bytes).unwrap();
+
+    let (_, rec) = StateDir::open::<Pose2>(&dir, &StateConfig::default()).unwrap();
+    let Some(&Record::Edge(o, written)) = records.last() else {
+        unreachable!()
+    };
+    let Some(&Record::Edge(o2, read)) = rec.tail.last() else {
+        panic!("no edge read back")
+    };
+    assert_eq!((o2, read.from, read.to, read.kind), (o, 1, 5, written.kind));
+    assert_eq!(read.information, written.information, "the old meaning kept Ω");
+    assert!(read
+        .measurement
+        .compose(&written.measurement)
+        .to_array()
+        .iter()
+        .all(|v| v.abs() < 1e-15));
+    assert_eq!(rec.tail[..records.len() - 1], records[..records.len() - 1]);
+    // rewritten in this version, where the turned edge means the same
+    let back = journal::read::<Pose2>(&path).unwrap().unwrap();
+    assert_eq!(back.version, FORMAT_VERSION);
+    assert_eq!(back.records, rec.tail);
+}
+
 /// The journal cut at every byte offset inside its last record: the
 /// daemon restarts with every record before it, the cut one is gone, and
 /// appending afterwards yields a journal that reads whole.
@@ -313,6 +361,41 @@ fn old_map_file(version: u32, generation: u64, body: &[u8]) -> Vec<u8> {
     let mut old = old_head(map::MAGIC, version, generation);
     bytes::frame(&mut old, body);
     old
+}
+
+/// A map keeps newer-first edges as written; one of format version 3
+/// reads them turned, information kept, as the slamd that wrote it
+/// solved them (its own edges were stored turned already; held edges
+/// were not).
+#[test]
+fn a_version_3_map_reads_newer_first_edges_as_it_solved_them() {
+    let mut map = sample_map();
+    let Record::Edge(o, held) = newer_first_loop_closure(6) else {
+        unreachable!()
+    };
+    map.held = vec![Record::Edge(o, held)];
+    map.edges[0].edge = EdgeInput {
+        from: 9,
+        to: 4,
+        ..map.edges[0].edge
+    };
+    let bytes = map.encode();
+    let path = Path::new("v3.map");
+    assert_eq!(MapFile::decode(path, &bytes).unwrap(), map, "as written");
+
+    let old = old_map_file(3, map.generation, &bytes[journal::HEAD + 8..]);
+    let read = MapFile::<Pose2>::decode(path, &old).unwrap();
+    let e = read.edges[0].edge;
+    assert_eq!(
+        (e.from, e.to, e.information),
+        (4, 9, map.edges[0].edge.information)
+    );
+    assert_eq!(e.measurement, map.edges[0].edge.measurement.inverse());
+    let Record::Edge(_, h) = read.held[0] else {
+        panic!("held edge lost")
+    };
+    assert_eq!((h.from, h.to, h.information), (1, 5, held.information));
+    assert_eq!(h.measurement, held.measurement.inverse());
 }
 
 #[test]
