@@ -11,10 +11,11 @@ Both results are scored by `slamd eval` (g2o's χ², ATE after rigid
 alignment), so the figures are comparable. Times exclude file I/O on both
 sides; each figure is the best of --repeat runs.
 
-2-D: GTSAM gets the same graph slamd solves (newer-id-first edges inverted,
-information kept; docs/design.md, "Scoring: χ² and ATE") and starts from the
-file's own initial guess, as a GTSAM user would; slamd starts from nothing
-(two-stage linear solve, then its polish).
+Both sides get every edge as written, BetweenFactor(i, j, Z) whichever id
+is newer (docs/design.md, "Edge direction").
+
+2-D: GTSAM starts from the file's own initial guess, as a GTSAM user would;
+slamd starts from nothing (two-stage linear solve, then its polish).
 
 3-D (the files under DATASETS/3d): GTSAM's LM starts from GTSAM's own chordal
 initialisation, `InitializePose3.initialize` on the graph plus a tight
@@ -34,13 +35,6 @@ D Ω D, D = diag(1, 1, 1, ½, ½, ½), permuted to [rotation; translation]; a
 HOG-Man Ω_rpy becomes slamd's Ω_q = diag(1, 1, 1, 2, 2, 2) Ω_rpy
 diag(1, 1, 1, 2, 2, 2) and then the same, i.e. Ω_rpy permuted.
 
-Newer-id-first edges (i > j) reach GTSAM as slamd stores and `slamd eval`
-scores them, BetweenFactor(j, i, Z⁻¹) with the same information, as in the
-2-D table. Kept as written, BetweenFactor(i, j, Z) (--peer-as-written), they
-are a different cost wherever the residual is not small: at slamd's optimum
-of smallgrid3d.g2o (33 such edges) χ² is 532 inverted and 662 as written,
-and GTSAM's as-written optimum scores 776.
-
 cubicle.g2o has 5021 edges whose information is not positive definite: slamd
 solves it with --skip-invalid; GTSAM gets every edge of the file, as readG2o
 would give it (noiseModel.Gaussian.Information does not refuse those
@@ -58,7 +52,7 @@ CASES = [  # file, optimum χ², ground truth
     ("city10000.g2o", 511.985, "groundtruth/city10000_groundtruth_isam.txt"),
     ("intel_sesync.g2o", 45.005, None),
     ("input_intel_g2o.g2o", 215.830, None),
-    ("mit_killian.g2o", 39.880, None),
+    ("mit_killian.g2o", 41.163, None),
     ("ring.g2o", 11.163, "groundtruth/ring_groundtruth.g2o"),
     ("ringcity.g2o", 262.818, "groundtruth/ringcity_groundtruth.g2o"),
 ]
@@ -89,9 +83,6 @@ def read_g2o(path):
             i, j = int(t[1]), int(t[2])
             x, y, th = map(float, t[3:6])
             info = list(map(float, t[6:12]))
-            if i > j:  # the convention slamd and the published optima use
-                c, s = math.cos(th), math.sin(th)
-                i, j, x, y, th = j, i, -(c * x + s * y), -(-s * x + c * y), -th
             edges.append((i, j, x, y, th, info))
     return vertices, edges
 
@@ -156,9 +147,8 @@ def gtsam_information(omega_q):
     return m[np.ix_(p, p)]
 
 
-def read_3d(path, invert=False):
-    """Vertices {id: Pose3} and edges [(i, j, Z, Ω in GTSAM's order)] of a g2o or HOG-Man 3-D file;
-    with `invert`, a newer-id-first edge becomes (j, i, Z⁻¹) with the same Ω, as slamd stores it."""
+def read_3d(path):
+    """Vertices {id: Pose3} and edges [(i, j, Z, Ω in GTSAM's order)], as written, of a g2o or HOG-Man 3-D file."""
     import gtsam
     import numpy as np
 
@@ -188,8 +178,6 @@ def read_3d(path, invert=False):
             omega = upper6(list(map(float, t[9:30])))
             omega_q = rpy_to_q[:, None] * omega * rpy_to_q[None, :]
             edges.append((int(t[1]), int(t[2]), rpy_pose(t[3:9]), gtsam_information(omega_q)))
-    if invert:
-        edges = [(j, i, z.inverse(), omega) if i > j else (i, j, z, omega) for i, j, z, omega in edges]
     return vertices, edges
 
 
@@ -199,7 +187,7 @@ def first_paragraph(e):
     return f"{type(e).__name__}: {' '.join(text.split())}"
 
 
-def gtsam3_child(path, repeat, invert, poses_path, queue):
+def gtsam3_child(path, repeat, poses_path, queue):
     """Runs in a child process (so a hang can be timed out): chordal init + LM,
     best of `repeat`; writes the poses as `id x y z qx qy qz qw` and puts
     (seconds, iterations, None) or (None, None, reason) on `queue`."""
@@ -207,7 +195,7 @@ def gtsam3_child(path, repeat, invert, poses_path, queue):
         import gtsam
         import numpy as np
 
-        vertices, edges = read_3d(path, invert)
+        vertices, edges = read_3d(path)
         graph = gtsam.NonlinearFactorGraph()
         for i, j, z, omega in edges:
             graph.add(gtsam.BetweenFactorPose3(i, j, z, gtsam.noiseModel.Gaussian.Information(omega)))
@@ -251,13 +239,13 @@ def gtsam3_child(path, repeat, invert, poses_path, queue):
         queue.put((None, None, first_paragraph(e)))
 
 
-def run_gtsam3(path, repeat, invert, timeout, poses_path):
+def run_gtsam3(path, repeat, timeout, poses_path):
     """(seconds, iterations, None) or (None, None, reason); the poses land in poses_path."""
     import queue as queue_module
 
     ctx = multiprocessing.get_context("fork")
     queue = ctx.Queue()
-    child = ctx.Process(target=gtsam3_child, args=(path, repeat, invert, poses_path, queue))
+    child = ctx.Process(target=gtsam3_child, args=(path, repeat, poses_path, queue))
     child.start()
     deadline = time.monotonic() + timeout * repeat if timeout > 0 else math.inf
     while True:
@@ -357,7 +345,7 @@ def table_3d(args):
         print(f"{name}: GTSAM …", file=sys.stderr, flush=True)
         with tempfile.NamedTemporaryFile("w", suffix=".txt", delete=False) as f:
             poses = f.name
-        secs, iters, peer_fail = run_gtsam3(path, args.repeat, not args.peer_as_written, args.peer_timeout, poses)
+        secs, iters, peer_fail = run_gtsam3(path, args.repeat, args.peer_timeout, poses)
         peer = None
         if peer_fail is None:
             peer, eval_fail = slamd_or_reason(args.slamd, ["eval", path, poses, "--json"] + gt_args)
@@ -396,9 +384,7 @@ def table_3d(args):
             t_ratio = f"{mine['seconds'] / secs:.2f}" if mine else "–"
         print(f"| {name} | {m_chi2} | {p_chi2} | {ratio} | {fmt_ate(mine)} | {p_ate} | {m_secs} | {p_secs} | {t_ratio} |")
     print()
-    print("- GTSAM: LM (at most 100 iterations) from `InitializePose3.initialize` (chordal), newer-id-first edges "
-          + ("as written, BetweenFactor(i, j, Z) (--peer-as-written)" if args.peer_as_written else "inverted, (j, i, Z⁻¹), as slamd stores them")
-          + f"; best of {args.repeat}")
+    print(f"- GTSAM: LM (at most 100 iterations) from `InitializePose3.initialize` (chordal), edges as written; best of {args.repeat}")
     if footnote:
         print(footnote)
     for n in notes:
@@ -413,9 +399,6 @@ def main():
     ap.add_argument("--files", nargs="+", metavar="NAME", help="only these files of the table (names as listed in CASES/CASES3)")
     ap.add_argument("--peer-timeout", type=float, default=600, metavar="S",
                     help="3-D: give up on GTSAM after S seconds per run, its graph building included (0: never); default 600")
-    ap.add_argument("--peer-as-written", action="store_true",
-                    help="3-D: give GTSAM newer-id-first edges as written, BetweenFactor(i, j, Z) "
-                         "(default: inverted, (j, i, Z⁻¹) with the same information, as slamd stores and scores them)")
     args = ap.parse_args()
     if args.files:
         known = {c[0] for c in (CASES3 if args.three_d else CASES)}

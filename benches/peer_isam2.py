@@ -8,8 +8,8 @@
         [--peer-timeout S] [--isam2-factorization qr] [--no-qr-retry]
 
 2-D (default files: manhattanolson3500, city10000, w10000). Both stream the
-same edges in time order (sorted by max(i, j), then min(i, j); newer-id-first
-edges inverted with their information kept) and produce a whole estimate after
+same edges, as written, in time order (sorted by max(i, j), then min(i, j))
+and produce a whole estimate after
 every keyframe: slamd's snapshot, and iSAM2's update() followed by
 calculateEstimate(). Latency per keyframe runs from the arrival of its edges
 to the estimate; each side also ends with its final answer (slamd: a last
@@ -25,11 +25,10 @@ with `--check-prefixes 5` added (checking slows the replay). The batch optimum
 is `slamd solve FILE --polish --json`. iSAM2 (default ISAM2Params:
 Gauss-Newton, Cholesky, relinearizeThreshold 0.1, relinearizeSkip 10) gets one
 update() per keyframe, in the order slamd streams (newer end, then older end,
-ties in file order): that keyframe's edges as BetweenFactorPose3,
-newer-id-first edges (i > j) as slamd stores them, (j, i, Z⁻¹) with the same
-information; an initial value for the new keyframe composed from the current estimate of
-the older end of its odometry edge (k-1, k), or failing that of its first
-edge to an existing keyframe; and, in the first update, the first keyframe at
+ties in file order): that keyframe's edges as BetweenFactorPose3(i, j, Z),
+as written; an initial value for the new keyframe composed from the current
+estimate of the older end of its odometry edge with k-1, or failing that of
+its first edge to an existing keyframe; and, in the first update, the first keyframe at
 the identity with a tight PriorFactorPose3. Each update is followed by
 calculateEstimate(). The information is built here as in
 benches/peer_gtsam.py (its read_3d), not taken from readG2o: g2o's Ω over
@@ -44,7 +43,7 @@ finds the system indeterminate (parking-garage.g2o at keyframe 585, as in
 borglab/gtsam#406) is run again with factorization QR, and the figures of
 that run are marked (--no-qr-retry: report the failure only).
 """
-import argparse, json, math, os, subprocess, sys, tempfile, threading, time
+import argparse, json, os, subprocess, sys, tempfile, threading, time
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 DATA = os.environ.get("SLAMD_DATASETS") or os.path.normpath(os.path.join(HERE, "..", "..", "shared", "datasets"))
@@ -53,7 +52,7 @@ DEFAULT3 = ["sphere2500.g2o", "parking-garage.g2o", "torus3d.g2o"]  # under DATA
 
 
 def read_graph(path):
-    """Edges (i, j, x, y, theta, info6 in g2o order), i < j."""
+    """Edges (i, j, x, y, theta, info6 in g2o order) as written, in time order."""
     toro = path.endswith(".graph")
     edges = []
     for line in open(path):
@@ -64,11 +63,8 @@ def read_graph(path):
         x, y, th = map(float, t[3:6])
         v = list(map(float, t[6:12]))
         info = [v[0], v[1], v[4], v[2], v[5], v[3]] if toro else v
-        if i > j:
-            c, s = math.cos(th), math.sin(th)
-            i, j, x, y, th = j, i, -(c * x + s * y), -(-s * x + c * y), -th
         edges.append((i, j, x, y, th, info))
-    edges.sort(key=lambda e: (e[1], e[0]))
+    edges.sort(key=lambda e: (max(e[0], e[1]), min(e[0], e[1])))
     return edges
 
 
@@ -81,7 +77,7 @@ def isam2_replay(path):
     estimate = {0: gtsam.Pose2()}
     latencies, by_key = [], {}
     for e in edges:
-        by_key.setdefault(e[1], []).append(e)
+        by_key.setdefault(max(e[0], e[1]), []).append(e)
     start = time.perf_counter()
     first = True
     for k in sorted(by_key):
@@ -97,6 +93,8 @@ def isam2_replay(path):
             graph.add(gtsam.BetweenFactorPose2(i, j, z, gtsam.noiseModel.Gaussian.Information(omega)))
             if j not in estimate and not values.exists(j) and i in estimate:
                 values.insert(j, estimate[i].compose(z))
+            elif i not in estimate and not values.exists(i) and j in estimate:
+                values.insert(i, estimate[j].compose(z.inverse()))
         isam.update(graph, values)
         result = isam.calculateEstimate()
         estimate = {key: result.atPose2(key) for key in result.keys()}
@@ -119,11 +117,11 @@ def isam2_replay3(path, factorization):
     sys.path.insert(0, HERE)
     from peer_gtsam import first_paragraph, read_3d
 
-    _, edges = read_3d(path, invert=True)  # (i, j, Z, Ω in GTSAM's order), i < j, file order
-    edges.sort(key=lambda e: (e[1], e[0]))  # stable: ties stay in file order
+    _, edges = read_3d(path)  # (i, j, Z, Ω in GTSAM's order) as written, file order
+    edges.sort(key=lambda e: (max(e[0], e[1]), min(e[0], e[1])))  # stable: ties stay in file order
     by_key = {}
     for e in edges:
-        by_key.setdefault(e[1], []).append(e)
+        by_key.setdefault(max(e[0], e[1]), []).append(e)
     first = min(e[0] for e in edges)
     prior = gtsam.noiseModel.Diagonal.Variances(np.array([1e-6, 1e-6, 1e-6, 1e-4, 1e-4, 1e-4]))
     params = gtsam.ISAM2Params()
@@ -140,11 +138,13 @@ def isam2_replay3(path, factorization):
             values.insert(first, gtsam.Pose3())
         seed = None
         for i, j, z, omega in by_key[k]:
-            if i not in known:
-                raise RuntimeError(f"keyframe {k}: edge from {i}, which has no estimate yet")
+            # the older end and the motion from it to k
+            older, step = (i, z) if j == k else (j, z.inverse())
+            if older not in known:
+                raise RuntimeError(f"keyframe {k}: edge from {older}, which has no estimate yet")
             graph.add(gtsam.BetweenFactorPose3(i, j, z, gtsam.noiseModel.Gaussian.Information(omega)))
-            if seed is None or i == k - 1:
-                seed = (i, z)
+            if seed is None or older == k - 1:
+                seed = (older, step)
         i, z = seed
         values.insert(k, (result.atPose3(i) if result is not None else gtsam.Pose3()).compose(z))
         known.add(k)
