@@ -1,6 +1,7 @@
 #!/usr/bin/env python3
 """g2o's cost of a pose graph's edges as written, scored outside slamd.
 
+    pip install numpy scipy
     python3 benches/as_written.py GRAPH POSES [--lm]
 
 GRAPH: a g2o file, 2-D (`EDGE_SE2`) or 3-D (`EDGE_SE3:QUAT`). POSES: a g2o

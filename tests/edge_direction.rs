@@ -18,7 +18,7 @@ use slamd::engine::EngineConfig;
 use slamd::geometry::Pose2;
 use slamd::graph::{EdgeKind, Information, Information6, Pose3, PoseGraph};
 use slamd::solver::{solve_batch, solve_batch3, BatchOptions};
-use slamd_tests::{max_pose_error, replay};
+use slamd_tests::{max_pose_error, replay, walk};
 use std::f64::consts::{FRAC_PI_2, PI};
 
 fn polished(g: &PoseGraph) -> Vec<Pose2> {
@@ -184,15 +184,6 @@ fn anisotropic2(scales: [f64; 3], turn: f64) -> Matrix3<f64> {
     m
 }
 
-fn walk2(steps: &[(f64, f64, f64)]) -> Vec<Pose2> {
-    let mut poses = vec![Pose2::IDENTITY];
-    for &(x, y, t) in steps {
-        let last = *poses.last().expect("non-empty");
-        poses.push(last.compose(&Pose2::new(x, y, t)));
-    }
-    poses
-}
-
 proptest! {
     #![proptest_config(ProptestConfig { cases: 32, ..ProptestConfig::default() })]
 
@@ -205,7 +196,7 @@ proptest! {
         loops in prop::collection::vec((0usize..100, 0usize..100, 0.0..PI, 0.0..4.0f64), 1..6),
         noise in prop::collection::vec(-0.05..0.05f64, 3 * 24),
     ) {
-        let truth = walk2(&steps);
+        let truth = walk(&steps);
         let n = truth.len();
         let mut pairs: Vec<(usize, usize, Matrix3<f64>)> =
             (1..n).map(|k| (k - 1, k, anisotropic2([50.0, 50.0, 200.0], 0.0))).collect();

@@ -4,7 +4,7 @@
 use proptest::prelude::*;
 use slamd::geometry::Pose2;
 use slamd::solver::{solve_batch, BatchOptions, Formulation};
-use slamd_tests::{max_pose_error, noise_free};
+use slamd_tests::{max_pose_error, noise_free, walk};
 use std::f64::consts::PI;
 
 const TOL: f64 = 1e-9;
@@ -27,16 +27,7 @@ fn check_all(truth: &[Pose2], pairs: &[(usize, usize)]) -> Result<(), TestCaseEr
     Ok(())
 }
 
-/// A random walk starting at the origin (the gauge).
-fn walk(steps: Vec<(f64, f64, f64)>) -> Vec<Pose2> {
-    let mut poses = vec![Pose2::IDENTITY];
-    for (x, y, t) in steps {
-        let last = *poses.last().expect("non-empty");
-        poses.push(last.compose(&Pose2::new(x, y, t)));
-    }
-    poses
-}
-
+/// One random step of a walk.
 fn step() -> impl Strategy<Value = (f64, f64, f64)> {
     (-2.0..2.0f64, -2.0..2.0f64, -PI..PI)
 }
@@ -46,7 +37,7 @@ proptest! {
 
     #[test]
     fn chains_with_random_loops(steps in prop::collection::vec(step(), 2..40), loops in prop::collection::vec((0usize..1000, 0usize..1000), 0..15)) {
-        let truth = walk(steps);
+        let truth = walk(&steps);
         let n = truth.len();
         let mut pairs: Vec<(usize, usize)> = (1..n).map(|k| (k - 1, k)).collect();
         pairs.extend(loops.into_iter().map(|(a, b)| (a % n, b % n)).filter(|(a, b)| a != b));
@@ -68,7 +59,7 @@ proptest! {
 
     #[test]
     fn newer_first_loops(steps in prop::collection::vec(step(), 3..20)) {
-        let truth = walk(steps);
+        let truth = walk(&steps);
         let n = truth.len();
         let mut pairs: Vec<(usize, usize)> = (1..n).map(|k| (k - 1, k)).collect();
         pairs.push((n - 1, 0));
@@ -94,7 +85,7 @@ proptest! {
             };
             steps.push((x, y, if kinds[k] == 4 { 0.0 } else { th }));
         }
-        let truth = walk(steps);
+        let truth = walk(&steps);
         let n = truth.len();
         let mut pairs: Vec<(usize, usize)> = (1..n).map(|k| (k - 1, k)).collect();
         pairs.push((0, n - 1));

@@ -11,7 +11,7 @@ use slamd::engine::{EdgeInput, Engine, EngineConfig, EngineError, FactorWork, Sn
 use slamd::geometry::Pose2;
 use slamd::graph::{chi2, EdgeKind, GraphError, Information, Keyframe, PoseGraph};
 use slamd::linear::two_stage::{self, PositionWeights};
-use slamd_tests::{max_pose_error, noise_free, read, relative_pose_error, replay};
+use slamd_tests::{max_pose_error, noise_free, read, relative_pose_error, replay, walk};
 
 /// An engine that never re-solves on its own and keeps the linear stages.
 fn exact_engine() -> Engine {
@@ -93,15 +93,6 @@ fn replay_checking(g: &PoseGraph, reweights: &[(usize, f64)]) -> Result<(), Test
         }
     }
     Ok(())
-}
-
-fn walk(steps: &[(f64, f64, f64)]) -> Vec<Pose2> {
-    let mut poses = vec![Pose2::IDENTITY];
-    for &(x, y, t) in steps {
-        let last = *poses.last().expect("non-empty");
-        poses.push(last.compose(&Pose2::new(x, y, t)));
-    }
-    poses
 }
 
 proptest! {

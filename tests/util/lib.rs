@@ -76,6 +76,17 @@ pub fn noise_free(truth: &[Pose2], pairs: &[(usize, usize)]) -> PoseGraph {
     g
 }
 
+/// The poses of a walk from the origin (the gauge) by relative `steps`
+/// `(x, y, θ)`, each in the frame of the pose before.
+pub fn walk(steps: &[(f64, f64, f64)]) -> Vec<Pose2> {
+    let mut poses = vec![Pose2::IDENTITY];
+    for &(x, y, t) in steps {
+        let last = *poses.last().expect("non-empty");
+        poses.push(last.compose(&Pose2::new(x, y, t)));
+    }
+    poses
+}
+
 /// The largest position or heading difference between two pose lists.
 pub fn max_pose_error(a: &[Pose2], b: &[Pose2]) -> f64 {
     a.iter()
