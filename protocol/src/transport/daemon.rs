@@ -89,6 +89,12 @@ impl Ingress {
         let edges = services::edges(&node, &ns, access)?;
         let gps = services::gps(&node, &ns, access)?;
         let poses = services::poses(&node, &ns, access)?;
+        if let Some(pid) = publisher_pid(&poses) {
+            return Err(TransportError::AlreadyServed {
+                namespace: namespace.to_string(),
+                pid,
+            });
+        }
         let rejections = services::rejections(&node, &ns, access)?;
         let switches = services::switches(&node, &ns, access)?;
         let status = services::status(&node, &ns, access)?;
@@ -204,6 +210,17 @@ impl Ingress {
     }
 }
 
+/// The process id of a live publisher of snapshots, if any: a daemon
+/// already serving the namespace (dead ones were cleaned up before).
+fn publisher_pid(poses: &Topic<[Pose], SnapshotHeader>) -> Option<i32> {
+    let mut pid = None;
+    poses.dynamic_config().list_publishers(|details| {
+        pid = details.node_id.pid::<ipc::Service>().ok().map(|p| p.value());
+        CallbackProgression::Stop
+    });
+    pid
+}
+
 /// Most passes one drain makes: a frontend that publishes faster than the
 /// daemon drains still lets the timer through.
 const MAX_PASSES: usize = 64;
@@ -262,12 +279,20 @@ impl Outlet {
         let ns = Namespace::new(namespace);
         let names = &ns.services;
         let node = node("slamd-daemon-outlet", false)?;
-        let poses = services::poses(&node, &ns, Access::Open)?
+        let topic = services::poses(&node, &ns, Access::Open)?;
+        // a daemon started in the same instant as another gets this far
+        let poses = topic
             .publisher_builder()
             .initial_max_slice_len(qos.initial_poses.max(1))
             .allocation_strategy(AllocationStrategy::PowerOfTwo)
             .create()
-            .map_err(|e| ns.fail("open", &names.poses, &e))?;
+            .map_err(|e| match publisher_pid(&topic) {
+                Some(pid) => TransportError::AlreadyServed {
+                    namespace: namespace.to_string(),
+                    pid,
+                },
+                None => ns.fail("open", &names.poses, &e),
+            })?;
         let rejections = services::rejections(&node, &ns, Access::Open)?
             .publisher_builder()
             .create()

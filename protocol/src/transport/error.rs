@@ -42,6 +42,13 @@ pub enum TransportError {
         /// Seconds waited.
         waited_s: f64,
     },
+    /// Another daemon, alive, already serves this namespace.
+    AlreadyServed {
+        /// The namespace.
+        namespace: String,
+        /// That daemon's process id.
+        pid: i32,
+    },
     /// Any other iceoryx2 failure, with its operation and cause.
     Other {
         /// What was attempted.
@@ -91,6 +98,9 @@ impl fmt::Display for TransportError {
                 f,
                 "the daemon serving `{namespace}` stopped answering and none came back within {waited_s:.1} s"
             ),
+            TransportError::AlreadyServed { namespace, pid } => {
+                write!(f, "namespace {namespace} is already served by slamd (pid {pid})")
+            }
             TransportError::Other { operation, cause } => write!(f, "{operation}: {cause}"),
         }
     }
