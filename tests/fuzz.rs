@@ -466,7 +466,7 @@ proptest! {
         let mut file = head.clone();
         file.extend_from_slice(&bytes);
         std::fs::write(&path, &file).unwrap();
-        let read = slamd::store::journal::read::<Pose2>(&path).unwrap().expect("the file is there");
+        let read = slamd::store::recovery::read::<Pose2>(&path).unwrap().expect("the file is there");
         prop_assert!(read.valid_len as usize <= file.len());
         prop_assert_eq!(read.cut.is_some(), (read.valid_len as usize) < file.len());
     }

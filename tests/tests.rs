@@ -2,6 +2,7 @@
 
 mod accuracy;
 mod cli;
+mod corruption;
 mod daemon;
 mod durable;
 mod edge_direction;

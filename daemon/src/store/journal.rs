@@ -7,10 +7,10 @@
 //! Records are buffered and written by [`Journal::commit`], once per batch
 //! (group commit), before the snapshot that acknowledges them goes out.
 
-use super::bytes::{frame, unframe, Framed, Put};
+use super::bytes::{frame, Put};
 use super::record::Record;
 use super::{StoreError, SyncPolicy, FORMAT_VERSION, OLDEST_FORMAT};
-use slamd_types::{Pose2, RigidMotion};
+use slamd_types::RigidMotion;
 use std::fs::{File, OpenOptions};
 use std::io::{Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
@@ -35,30 +35,6 @@ pub struct Journal {
     /// Written since the last fsync.
     unsynced: bool,
     generation: u64,
-}
-
-/// Where a journal's readable part ended and why.
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub struct Cut {
-    /// The byte offset of the first record left out.
-    pub offset: u64,
-    /// Why it was left out.
-    pub reason: String,
-}
-
-/// What [`read`] found.
-#[derive(Debug)]
-pub struct Contents<P: RigidMotion = Pose2> {
-    /// The map generation the journal follows.
-    pub generation: u64,
-    /// The format version its head names.
-    pub version: u32,
-    /// Its whole, checked records, in order.
-    pub records: Vec<Record<P>>,
-    /// Bytes that hold them (the head included).
-    pub valid_len: u64,
-    /// Set when the file went on past them: torn or corrupt from there.
-    pub cut: Option<Cut>,
 }
 
 /// A file's head: `magic | version | crc32c | generation`.
@@ -108,49 +84,6 @@ pub(super) fn check_head(
         });
     }
     Ok((generation, version))
-}
-
-/// Reads a journal: every record up to the first that is torn, fails its
-/// checksum or does not decode. `Ok(None)` when there is no file; an
-/// error when a record is of the other dimension than `P`'s (a daemon
-/// started on another dimension's directory must not cut it).
-pub fn read<P: RigidMotion>(path: &Path) -> Result<Option<Contents<P>>, StoreError> {
-    let bytes = match std::fs::read(path) {
-        Ok(b) => b,
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
-        Err(e) => return Err(StoreError::io("read", path, e)),
-    };
-    let (generation, version) = check_head(path, &bytes, MAGIC, "journal")?;
-    let mut records = Vec::new();
-    let mut at = HEAD;
-    let mut cut = None;
-    while at < bytes.len() {
-        let reason = match unframe(&bytes[at..]) {
-            Framed::Whole(payload, used) => match Record::decode(payload) {
-                Ok(r) => {
-                    records.push(r.of_version(version));
-                    at += used;
-                    continue;
-                }
-                Err(e @ StoreError::Dimension { .. }) => return Err(e),
-                Err(e) => e.to_string(),
-            },
-            Framed::Torn => "torn (the file ends inside it)".into(),
-            Framed::Corrupt => "checksum mismatch".into(),
-        };
-        cut = Some(Cut {
-            offset: at as u64,
-            reason,
-        });
-        break;
-    }
-    Ok(Some(Contents {
-        generation,
-        version,
-        records,
-        valid_len: at as u64,
-        cut,
-    }))
 }
 
 impl Journal {

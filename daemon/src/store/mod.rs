@@ -12,19 +12,22 @@
 //!   dropped.
 //! - `lock`: held (`flock`) while a daemon uses the directory.
 //!
-//! On start, [`StateDir::open`] reads both: the journal's records up to
-//! the first torn or corrupt one (the rest is cut off, with a warning),
-//! and the map. A file of another format version is refused, never
+//! On start, [`StateDir::open`] reads both: the journal's records, a torn
+//! last record cut off with a warning, and the map. A damaged record with
+//! whole records after it is corruption: the directory is refused,
+//! unchanged, until [`recovery::recover`] has kept what can be verified. A file of another format version is refused, never
 //! misread. The formats are in docs/daemon.md, "State directory".
 
 mod bytes;
 pub mod journal;
 pub mod map;
 pub mod record;
+pub mod recovery;
 
-pub use journal::{Cut, Journal};
+pub use journal::Journal;
 pub use map::{AckState, MapEdge, MapFile, MapKeyframe, SavedGeoref};
 pub use record::Record;
+pub use recovery::{Cut, Damage};
 
 use serde::{Deserialize, Serialize};
 use slamd_types::{Pose2, RigidMotion};
@@ -115,6 +118,18 @@ pub enum StoreError {
         /// The map's.
         map: u64,
     },
+    /// A journal record is damaged and whole records follow it: not a
+    /// torn write, which can damage only the last one.
+    Damaged {
+        /// The journal.
+        path: PathBuf,
+        /// Where the damaged record starts.
+        offset: u64,
+        /// What is wrong with it.
+        reason: String,
+        /// Whole records after it.
+        following: usize,
+    },
 }
 
 impl StoreError {
@@ -145,6 +160,19 @@ impl fmt::Display for StoreError {
                  give each dimension its own state directory"
             ),
             StoreError::Locked(dir) => write!(f, "another slamd uses the state directory {}", dir.display()),
+            StoreError::Damaged {
+                path,
+                offset,
+                reason,
+                following,
+            } => write!(
+                f,
+                "{}: the record at byte {offset} is damaged ({reason}) and {following} whole records follow it; \
+                 a torn write damages only the last record, so this is corruption and nothing was changed. \
+                 `slamd recover --state {}` keeps every record that can be verified",
+                path.display(),
+                path.parent().unwrap_or(Path::new(".")).display()
+            ),
             StoreError::Mismatch { journal, map } => write!(
                 f,
                 "the journal follows map generation {journal}, but the map is at generation {map}: \
@@ -249,9 +277,9 @@ impl StateDir {
         // map may still be called journal.next
         let path = dir.join("journal");
         let next = dir.join("journal.next");
-        let mut found = journal::read(&path)?;
+        let mut found = recovery::read(&path)?;
         if found.as_ref().is_none_or(|c| c.generation < generation) {
-            if let Ok(Some(c)) = journal::read(&next) {
+            if let Ok(Some(c)) = recovery::read(&next) {
                 if c.generation == generation {
                     std::fs::rename(&next, &path).map_err(|e| StoreError::io("rename into", &path, e))?;
                     found = Some(c);
@@ -335,7 +363,7 @@ impl StateDir {
 }
 
 /// Takes the directory's lock file, or fails if another process holds it.
-fn lock(dir: &Path) -> Result<File, StoreError> {
+pub(super) fn lock(dir: &Path) -> Result<File, StoreError> {
     use std::os::fd::AsRawFd;
     let path = dir.join("lock");
     let f = std::fs::OpenOptions::new()

@@ -28,4 +28,6 @@ pub enum Command {
     Export(crate::export::ExportOpts),
     /// Show a running daemon's health: map, input, snapshot, latency, journal.
     Status(crate::status::StatusOpts),
+    /// Keep every journal record that can be verified after corruption.
+    Recover(crate::recover::RecoverOpts),
 }

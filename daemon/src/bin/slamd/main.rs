@@ -7,6 +7,7 @@ mod eval;
 mod export;
 mod gps;
 mod input;
+mod recover;
 mod replay;
 mod robust;
 mod run;
@@ -33,6 +34,7 @@ fn main() -> ExitCode {
         cli::Command::Demo(opts) => demo::run(opts),
         cli::Command::Replay(opts) => replay::run(opts),
         cli::Command::Run(opts) => run::run(opts),
+        cli::Command::Recover(opts) => recover::run(opts),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
