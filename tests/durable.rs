@@ -140,3 +140,75 @@ fn a_daemon_continues_a_saved_map_to_the_optimum() {
     let counters = server.join().unwrap();
     assert_eq!((counters.keyframes, counters.rejected), (3500, 0));
 }
+
+/// A tmpfs mounted for a test, unmounted when it goes.
+struct Tmpfs(PathBuf);
+
+impl Tmpfs {
+    fn mount(dir: &std::path::Path, size: &str) -> Tmpfs {
+        std::fs::create_dir_all(dir).unwrap();
+        let status = Command::new("mount")
+            .args(["-t", "tmpfs", "-o", &format!("size={size}"), "tmpfs"])
+            .arg(dir)
+            .status()
+            .expect("run mount");
+        assert!(
+            status.success(),
+            "mounting a tmpfs at {} needs root",
+            dir.display()
+        );
+        Tmpfs(dir.to_path_buf())
+    }
+
+    fn resize(&self, size: &str) {
+        let status = Command::new("mount")
+            .args(["-o", &format!("remount,size={size}")])
+            .arg(&self.0)
+            .status()
+            .expect("run mount");
+        assert!(status.success(), "remounting {}", self.0.display());
+    }
+}
+
+impl Drop for Tmpfs {
+    fn drop(&mut self) {
+        let _ = Command::new("umount").arg(&self.0).status();
+    }
+}
+
+/// The state directory on a 300 KiB tmpfs, which Manhattan's journal
+/// outgrows partway: the daemon holds its acknowledgements, the replay
+/// waits for it (saying why) instead of giving up after its 5 s, and when
+/// the tmpfs grows to 100 MiB 10 s later the replay completes at the
+/// optimum with every keyframe.
+#[test]
+fn a_full_disk_holds_the_stream_until_space_returns() {
+    let mount = state_dir("full-disk");
+    let tmpfs = Tmpfs::mount(&mount, "300k");
+    let state = mount.join("state");
+    let namespace = format!("slamd-test-{}-full-disk", std::process::id());
+    let daemon = Daemon::serve(&namespace, &["--state", state.to_str().unwrap()], &[]);
+    let file = dataset("manhattanolson3500_g2oversion.g2o");
+    let replay = Command::new(slamd_bin())
+        .args(["replay", file.to_str().unwrap(), "--namespace", &namespace])
+        .args(["--json", "--timeout", "5"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("start the replay");
+    std::thread::sleep(Duration::from_secs(10));
+    tmpfs.resize("100m");
+    let out = replay.wait_with_output().expect("the replay ends");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "replay failed: {stderr}");
+    assert!(
+        stderr.contains("is alive but holds its acknowledgements: its journal cannot be written"),
+        "{stderr}"
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON");
+    let chi2 = v["chi2"].as_f64().unwrap();
+    assert!((chi2 - 146.077).abs() < 1e-3, "final χ² {chi2}");
+    assert!(daemon.stop().success());
+    let map = MapFile::<Pose2>::read(&state.join("map")).expect("a checkpoint on SIGTERM");
+    assert_eq!(map.keyframes.len(), 3500);
+}

@@ -208,6 +208,8 @@ class Link:
         # the daemon serving now (status has a history of 1; it also comes every tick)
         self.first_status = self._await_status(0.5)
         self.instance = self.first_status.instance if self.first_status else 0
+        self.heard = time.monotonic()  # the daemon's last snapshot or status
+        self.holding = False  # its last status said its journal cannot be written
 
     def _name(self, suffix):
         return iox2.ServiceName.new(f"{self.ns.rstrip('/')}/{suffix}")
@@ -304,6 +306,8 @@ class Link:
         s = self.latest_status()
         if s is None:
             return False
+        # a status is a sign of life, also from a daemon that holds its acks
+        self.heard, self.holding = time.monotonic(), s.journal_failing != 0
         acked = ack_of(s.acks, self.id) or 0
         self.forget_through(acked)
         if s.instance == self.instance:
@@ -386,6 +390,7 @@ def poses_of(sample):
 
 RESTART_POLL = 0.05  # s between looks at the acks while waiting
 QUIET = 3.0  # s without a snapshot after the stream: the daemon is at rest
+SAY_EVERY_S = 5.0  # s between notes on a daemon that is alive but holding
 
 
 class Replay:
@@ -405,6 +410,7 @@ class Replay:
             left = max(0.0, deadline - time.monotonic())
             s = self.link.wait_snapshot(min(left, RESTART_POLL))
             if s is not None:
+                self.link.heard = time.monotonic()
                 break
             self.link.poll()
             if left <= RESTART_POLL:
@@ -416,13 +422,23 @@ class Replay:
         self._take(s)
 
     def drain(self):
-        deadline = time.monotonic() + self.timeout_s
+        """Waits for the acknowledgement of every keyframe sent while the daemon
+        shows it is alive (a snapshot or a status within the timeout); says why
+        every SAY_EVERY_S while it holds its acknowledgements."""
+        self.link.heard, waiting, said = time.monotonic(), time.monotonic(), None
         while self.pending:
-            left = deadline - time.monotonic()
+            now = time.monotonic()
+            left = self.link.heard + self.timeout_s - now
             if left <= 0:
                 raise SystemExit(f"the daemon serving `{self.link.ns}` did not answer within "
                                  f"{self.timeout_s:.1f} s (is `slamd run` alive?)")
-            self.collect(left)
+            if now - waiting >= self.timeout_s and (said is None or now - said >= SAY_EVERY_S):
+                said = now
+                why = ("holds its acknowledgements: its journal cannot be written (a full disk?)"
+                       if self.link.holding else "has not acknowledged")
+                print(f"the daemon serving `{self.link.ns}` is alive but {why}; waiting "
+                      f"({now - waiting:.0f} s so far)", file=sys.stderr)
+            self.collect(min(left, SAY_EVERY_S))
 
     def keyframe(self, k, kid, guess, edges, dim):
         last = self.link.send_keyframe(kid, guess, dim)

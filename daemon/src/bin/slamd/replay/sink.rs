@@ -127,6 +127,12 @@ pub struct DaemonSink {
     pending: VecDeque<(usize, u64, Instant)>,
     latest: Option<slamd::ipc::SnapshotSample>,
     pace: Option<(Instant, Duration)>,
+    /// The daemon's last sign of life: a snapshot or a status.
+    heard: Instant,
+    /// Whether its last status said its journal cannot be written.
+    holding: bool,
+    /// When the replay last said why it waits.
+    said: Option<Instant>,
 }
 
 impl DaemonSink {
@@ -161,6 +167,9 @@ impl DaemonSink {
             pending: VecDeque::new(),
             latest: None,
             pace: rate.map(|hz| (Instant::now(), Duration::from_secs_f64(1.0 / hz))),
+            heard: Instant::now(),
+            holding: false,
+            said: None,
         })
     }
 
@@ -173,7 +182,12 @@ impl DaemonSink {
         let snapshot = loop {
             let left = deadline.saturating_duration_since(Instant::now());
             if let Some(s) = self.snapshots.wait(left.min(RESTART_POLL))? {
+                self.heard = Instant::now();
                 break Some(s);
+            }
+            if let Some(status) = self.snapshots.status()? {
+                self.heard = Instant::now();
+                self.holding = status.journal_failing != 0;
             }
             self.frontend.poll()?;
             if left <= RESTART_POLL {
@@ -191,6 +205,26 @@ impl DaemonSink {
             self.latest = Some(s);
         }
         Ok(done)
+    }
+
+    /// Says, at most every [`SAY_EVERY`], why the replay still waits for a
+    /// daemon that is alive.
+    fn say_why(&mut self) {
+        let waited = self.pending.front().map_or(Duration::ZERO, |p| p.2.elapsed());
+        if waited < self.timeout || self.said.is_some_and(|t| t.elapsed() < SAY_EVERY) {
+            return;
+        }
+        self.said = Some(Instant::now());
+        let why = if self.holding {
+            "holds its acknowledgements: its journal cannot be written (a full disk?)"
+        } else {
+            "has not acknowledged"
+        };
+        eprintln!(
+            "slamd: the daemon serving `{}` is alive but {why}; waiting ({:.0} s so far)",
+            self.namespace,
+            waited.as_secs_f64()
+        );
     }
 
     fn no_answer(&self) -> anyhow::Error {
@@ -245,15 +279,19 @@ impl<P: ReplayPose> Sink<P> for DaemonSink {
         Ok(done)
     }
 
+    /// Waits for the snapshots that acknowledge every keyframe sent, as long
+    /// as the daemon shows it is alive: it gives up only after `timeout`
+    /// with neither a snapshot nor a status from it.
     fn drain(&mut self) -> anyhow::Result<Vec<(usize, f64)>> {
         let mut done = Vec::new();
-        let deadline = Instant::now() + self.timeout;
+        self.heard = Instant::now();
         while !self.pending.is_empty() {
-            let left = deadline.saturating_duration_since(Instant::now());
+            let left = (self.heard + self.timeout).saturating_duration_since(Instant::now());
             if left.is_zero() {
                 return Err(self.no_answer());
             }
-            done.extend(self.collect(left)?);
+            done.extend(self.collect(left.min(SAY_EVERY))?);
+            self.say_why();
         }
         Ok(done)
     }
@@ -312,6 +350,9 @@ impl<P: ReplayPose> Sink<P> for DaemonSink {
 /// How often a replay waiting for a snapshot checks whether the daemon
 /// restarted.
 const RESTART_POLL: Duration = Duration::from_millis(50);
+
+/// A replay waiting for a daemon that is alive says why at most this often.
+const SAY_EVERY: Duration = Duration::from_secs(5);
 
 /// No snapshot for this long after the stream ends: the daemon's closing
 /// re-solves are done.
