@@ -1,7 +1,10 @@
 //! The `slamd` command line, end to end.
 
-use slamd_tests::{dataset, run_json, run_slamd};
+use crate::daemon::Daemon;
+use slamd_tests::{dataset, run_json, run_slamd, slamd_bin};
 use std::io::Write;
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
 
 #[test]
 fn solve_json_reports_the_required_fields() {
@@ -238,7 +241,7 @@ fn solve_eval_and_replay_read_3d_graphs() {
     let streamed = r["chi2"].as_f64().expect("chi2");
     assert!((streamed - chi2).abs() < 1e-6 * chi2, "{streamed} vs {chi2}");
     // a daemon serving 2-D graphs is named, not fed messages it refuses
-    let daemon = crate::daemon::Daemon::start("cli-2d", &[]);
+    let daemon = Daemon::start("cli-2d", &[]);
     let (code, _, err) = run_slamd(&["replay", file, "--namespace", &daemon.namespace]);
     assert_ne!(code, 0);
     assert!(
@@ -273,4 +276,39 @@ fn tum_and_kitti_trajectories_read_back_at_the_same_chi2() {
             );
         }
     }
+}
+
+/// A second daemon on a namespace a live one serves exits 2 naming it,
+/// with nothing else on stderr, and the first one goes on serving.
+#[test]
+fn a_second_daemon_on_a_served_namespace_names_the_first() {
+    let first = Daemon::start("second", &[]);
+    let ns = first.namespace.clone();
+    // the first publishes its status once its engine thread is up
+    let deadline = Instant::now() + Duration::from_secs(20);
+    while run_slamd(&["status", "--namespace", &ns]).0 != 0 {
+        assert!(Instant::now() < deadline, "no status from `{ns}`");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let out = Command::new(slamd_bin())
+        .args(["run", "--namespace", &ns])
+        .env("SLAMD_LOG", "info")
+        .stdin(Stdio::null())
+        .output()
+        .expect("run a second daemon");
+    assert_eq!(out.status.code(), Some(2));
+    assert_eq!(
+        String::from_utf8_lossy(&out.stderr),
+        format!(
+            "slamd: namespace {ns} is already served by slamd (pid {})\n",
+            first.pid()
+        )
+    );
+    assert!(out.stdout.is_empty());
+    assert_eq!(
+        run_slamd(&["status", "--namespace", &ns]).0,
+        0,
+        "the first daemon stopped serving"
+    );
+    assert!(first.stop().success());
 }

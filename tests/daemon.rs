@@ -7,7 +7,7 @@ use slamd_client::{
 };
 use slamd_protocol::codec::{edge_out, Origin};
 use slamd_protocol::{Edge, PROTOCOL_VERSION};
-use slamd_tests::{read, run_slamd, slamd_bin};
+use slamd_tests::{read, slamd_bin};
 use std::collections::HashMap;
 use std::process::{Child, Command, ExitStatus, Stdio};
 use std::time::{Duration, Instant};
@@ -572,39 +572,4 @@ fn status_shows_a_running_daemon() {
         slamd_tests::run_slamd(&["status", "--namespace", "slamd-test-nobody", "--wait", "0.2"]);
     assert_eq!(code, 2);
     assert!(err.contains("no slamd daemon publishes"), "{err}");
-}
-
-/// A second daemon on a namespace a live one serves exits 2 naming it,
-/// with nothing else on stderr, and the first one goes on serving.
-#[test]
-fn a_second_daemon_on_a_served_namespace_names_the_first() {
-    let first = Daemon::start("second", &[]);
-    let ns = first.namespace.clone();
-    // the first publishes its status once its engine thread is up
-    let deadline = Instant::now() + Duration::from_secs(20);
-    while run_slamd(&["status", "--namespace", &ns]).0 != 0 {
-        assert!(Instant::now() < deadline, "no status from `{ns}`");
-        std::thread::sleep(Duration::from_millis(50));
-    }
-    let out = Command::new(slamd_bin())
-        .args(["run", "--namespace", &ns])
-        .env("SLAMD_LOG", "info")
-        .stdin(Stdio::null())
-        .output()
-        .expect("run a second daemon");
-    assert_eq!(out.status.code(), Some(2));
-    assert_eq!(
-        String::from_utf8_lossy(&out.stderr),
-        format!(
-            "slamd: namespace {ns} is already served by slamd (pid {})\n",
-            first.pid()
-        )
-    );
-    assert!(out.stdout.is_empty());
-    assert_eq!(
-        run_slamd(&["status", "--namespace", &ns]).0,
-        0,
-        "the first daemon stopped serving"
-    );
-    assert!(first.stop().success());
 }
