@@ -175,6 +175,8 @@ fn damage_anywhere_is_refused_unchanged_and_recovered_to_the_whole_graph() {
     );
 }
 
+/// The directory's first checkpoint, so no earlier one to fall back to
+/// (`store::tests::damage` has the fall-back).
 #[test]
 fn a_damaged_map_is_refused_unchanged() {
     let clean = state_dir("map-clean");

@@ -10,6 +10,9 @@
 //!   new journal that names it. A journal naming an older generation was
 //!   already folded into the map (a crash between the two renames) and is
 //!   dropped.
+//! - `map.prev`, `journal.prev`: the checkpoint before and the journal
+//!   that followed it, kept by each checkpoint: a map that fails its
+//!   checksum falls back to them and the current journal.
 //! - `lock`: held (`flock`) while a daemon uses the directory.
 //!
 //! On start, [`StateDir::open`] reads both: the journal's records, a torn
@@ -244,6 +247,9 @@ pub struct StateDir {
     dir: PathBuf,
     journal: Journal,
     config: StateConfig,
+    /// The map failed its checksum and the directory was taken up from the
+    /// checkpoint before it: the next checkpoint replaces it.
+    damaged_map: bool,
     _lock: File,
 }
 
@@ -262,15 +268,33 @@ impl StateDir {
         let lock = lock(dir)?;
         let map_path = dir.join("map");
         let map = match std::fs::metadata(&map_path) {
-            Ok(_) => Some(MapFile::read(&map_path)?),
+            Ok(_) => Some(MapFile::read(&map_path)),
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => None,
             Err(e) => return Err(StoreError::io("read", &map_path, e)),
         };
-        let generation = map.as_ref().map_or(0, |m| m.generation);
+        // a map that fails its checksum falls back to the checkpoint before
+        // it and the two journals since, where they are whole
+        let (map, before, damaged_map) = match map.transpose() {
+            Ok(map) => (map, Vec::new(), false),
+            Err(e @ (StoreError::Corrupt { .. } | StoreError::NotOurs { .. })) => {
+                let Some((previous, records)) = recovery::previous_checkpoint::<P>(dir) else {
+                    return Err(e);
+                };
+                tracing::warn!(
+                    error = %e,
+                    generation = previous.generation,
+                    "The map is damaged; continuing from the checkpoint before it and the journals since."
+                );
+                (Some(previous), records, true)
+            }
+            Err(e) => return Err(e),
+        };
+        // the journal that follows the map (after a fall-back: the damaged one)
+        let generation = map.as_ref().map_or(0, |m| m.generation + u64::from(damaged_map));
         let interval = Duration::from_millis(config.sync_interval_ms);
         let mut recovered = Recovered {
             map,
-            tail: Vec::new(),
+            tail: before,
             cut: None,
         };
         // after a crash inside a checkpoint the journal that follows the
@@ -294,7 +318,7 @@ impl StateDir {
                 } else {
                     Journal::append_to(&path, c.valid_len, generation, config.sync, interval)?
                 };
-                recovered.tail = c.records;
+                recovered.tail.extend(c.records);
                 recovered.cut = c.cut;
                 journal
             }
@@ -311,6 +335,7 @@ impl StateDir {
             dir: dir.to_path_buf(),
             journal,
             config: config.clone(),
+            damaged_map,
             _lock: lock,
         };
         Ok((state, recovered))
@@ -333,10 +358,34 @@ impl StateDir {
     /// journal that the next start drops (its records are in the map) and
     /// `journal.next`, which it takes. On an error before the map's
     /// rename nothing changed.
+    ///
+    /// The checkpoint it replaces and the journal after that are kept as
+    /// `map.prev` and `journal.prev` (links, or copies where the file
+    /// system has none): a map that later fails its checksum falls back to
+    /// them. After such a fall-back the damaged map is kept as
+    /// `map.damaged-SECONDS` instead, and `.prev` stays as it was.
     pub fn checkpoint<P: RigidMotion>(&mut self, mut map: MapFile<P>) -> Result<(), StoreError> {
         let generation = self.journal.generation() + 1;
         map.generation = generation;
         let interval = Duration::from_millis(self.config.sync_interval_ms);
+        // what the map holds is in the journal being kept, as far as it can be
+        let _ = self.journal.commit();
+        if self.damaged_map {
+            let aside = recovery::aside_name(&self.dir, "map.damaged")?;
+            keep(&self.dir.join("map"), &aside)?;
+        } else {
+            // the journal first: a crash between the two leaves a pair of
+            // generations that do not match, which no fall-back takes
+            for name in ["journal", "map"] {
+                let from = self.dir.join(name);
+                if from.exists() {
+                    let tmp = self.dir.join(format!("{name}.prev.tmp"));
+                    keep(&from, &tmp)?;
+                    let to = self.dir.join(format!("{name}.prev"));
+                    std::fs::rename(&tmp, &to).map_err(|e| StoreError::io("rename into", &to, e))?;
+                }
+            }
+        }
         let next = self.dir.join("journal.next");
         let journal = Journal::create(&next, generation, self.config.sync, interval)?;
         let path = self.dir.join("map");
@@ -345,6 +394,7 @@ impl StateDir {
             return Err(e);
         }
         self.journal = journal;
+        self.damaged_map = false;
         let path = self.dir.join("journal");
         std::fs::rename(&next, &path).map_err(|e| StoreError::io("rename into", &path, e))?;
         self.journal.moved_to(&path);
@@ -360,6 +410,15 @@ impl StateDir {
     pub fn journal_full(&self) -> bool {
         self.journal.len() >= self.config.checkpoint_journal_mib << 20
     }
+}
+
+/// A second name for the file at `from` (a hard link, or a copy where the
+/// file system has none), replacing whatever `to` was.
+fn keep(from: &Path, to: &Path) -> Result<(), StoreError> {
+    let _ = std::fs::remove_file(to);
+    std::fs::hard_link(from, to)
+        .or_else(|_| std::fs::copy(from, to).map(|_| ()))
+        .map_err(|e| StoreError::io("keep a copy of", from, e))
 }
 
 /// Takes the directory's lock file, or fails if another process holds it.

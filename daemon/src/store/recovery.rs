@@ -12,6 +12,7 @@
 
 use super::bytes::{unframe, Framed};
 use super::journal::{check_head, HEAD, MAGIC};
+use super::map::MapFile;
 use super::record::Record;
 use super::StoreError;
 use slamd_types::{Pose2, RigidMotion};
@@ -98,23 +99,30 @@ fn whole_record<P: RigidMotion>(bytes: &[u8]) -> Result<Result<(Record<P>, usize
     }
 }
 
-/// Reads every frame after the head, resynchronising past a damaged one
-/// at the next offset where a whole record starts (by its length and
-/// checksum). Damage with no whole record after it is a torn tail.
-fn scan<P: RigidMotion>(
-    bytes: &[u8],
-    version: u32,
-) -> Result<(Vec<(u64, Record<P>)>, Vec<Damage>, Option<Cut>, u64), StoreError> {
-    let mut records = Vec::new();
-    let mut damage = Vec::new();
+/// Reads every frame after the head of a journal of `generation` and
+/// `version`, resynchronising past a damaged one at the next offset where
+/// a whole record starts (by its length and checksum). Damage with no
+/// whole record after it is a torn tail.
+fn scan<P: RigidMotion>(bytes: &[u8], generation: u64, version: u32) -> Result<Salvage<P>, StoreError> {
+    let mut out = Salvage {
+        contents: Contents {
+            generation,
+            version,
+            records: Vec::new(),
+            valid_len: HEAD as u64,
+            cut: None,
+        },
+        damage: Vec::new(),
+        offsets: Vec::new(),
+    };
     let mut at = HEAD;
-    let mut valid_len = HEAD as u64;
     while at < bytes.len() {
         let reason = match whole_record::<P>(&bytes[at..])? {
             Ok((r, used)) => {
-                records.push((at as u64, r.of_version(version)));
+                out.offsets.push(at as u64);
+                out.contents.records.push(r.of_version(version));
                 at += used;
-                valid_len = at as u64;
+                out.contents.valid_len = at as u64;
                 continue;
             }
             Err(reason) => reason,
@@ -126,25 +134,23 @@ fn scan<P: RigidMotion>(
                 break;
             }
         }
+        let offset = at as u64;
         match next {
             Some(p) => {
-                damage.push(Damage {
-                    offset: at as u64,
+                out.damage.push(Damage {
+                    offset,
                     len: (p - at) as u64,
                     reason,
                 });
                 at = p;
             }
             None => {
-                let cut = Cut {
-                    offset: at as u64,
-                    reason,
-                };
-                return Ok((records, damage, Some(cut), valid_len));
+                out.contents.cut = Some(Cut { offset, reason });
+                break;
             }
         }
     }
-    Ok((records, damage, None, valid_len))
+    Ok(out)
 }
 
 /// The file's bytes and its head's generation and version; `None` when
@@ -190,19 +196,7 @@ pub fn salvage<P: RigidMotion>(path: &Path) -> Result<Option<Salvage<P>>, StoreE
     let Some((bytes, generation, version)) = open_file(path)? else {
         return Ok(None);
     };
-    let (records, damage, cut, valid_len) = scan::<P>(&bytes, version)?;
-    let offsets = records.iter().map(|(o, _)| *o).collect();
-    Ok(Some(Salvage {
-        contents: Contents {
-            generation,
-            version,
-            records: records.into_iter().map(|(_, r)| r).collect(),
-            valid_len,
-            cut,
-        },
-        damage,
-        offsets,
-    }))
+    scan::<P>(&bytes, generation, version).map(Some)
 }
 
 /// Message numbers of one frontend that a damaged stretch held, told by
@@ -215,6 +209,20 @@ pub struct Lost {
     pub first: u64,
     /// The last number missing.
     pub last: u64,
+}
+
+/// The checkpoint before the current one and the records of the journal
+/// that followed it (`map.prev`, `journal.prev`), when both are whole and
+/// of the same generation: what a map that fails its checksum falls back
+/// to, with the current journal after them.
+pub fn previous_checkpoint<P: RigidMotion>(dir: &Path) -> Option<(MapFile<P>, Vec<Record<P>>)> {
+    let map_path = dir.join("map.prev");
+    // a missing or damaged copy is no fall-back: the map's own error is the one to tell
+    let map = MapFile::<P>::read(&map_path).ok()?;
+    match read::<P>(&dir.join("journal.prev")) {
+        Ok(Some(j)) if j.generation == map.generation && j.cut.is_none() => Some((map, j.records)),
+        _ => None,
+    }
 }
 
 /// What [`recover`] did to a state directory's journal.
@@ -269,10 +277,8 @@ pub fn recover<P: RigidMotion>(dir: &Path) -> Result<Recovery, StoreError> {
             moved_to: None,
         });
     }
-    let aside = aside_name(dir)?;
-    std::fs::hard_link(&path, &aside)
-        .or_else(|_| std::fs::copy(&path, &aside).map(|_| ()))
-        .map_err(|e| StoreError::io("keep a copy of", &path, e))?;
+    let aside = aside_name(dir, "journal.damaged")?;
+    super::keep(&path, &aside)?;
     let policy = super::SyncPolicy::Always;
     drop(super::Journal::rewrite(
         &path,
@@ -289,12 +295,12 @@ pub fn recover<P: RigidMotion>(dir: &Path) -> Result<Recovery, StoreError> {
     })
 }
 
-/// `journal.damaged-SECONDS` in `dir`, with `-N` added if that is taken.
-fn aside_name(dir: &Path) -> Result<std::path::PathBuf, StoreError> {
+/// `STEM-SECONDS` in `dir`, with `-N` added if that is taken.
+pub(super) fn aside_name(dir: &Path, stem: &str) -> Result<std::path::PathBuf, StoreError> {
     let secs = std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)
         .map_or(0, |d| d.as_secs());
-    let base = format!("journal.damaged-{secs}");
+    let base = format!("{stem}-{secs}");
     (0..1000)
         .map(|n| {
             dir.join(if n == 0 {

@@ -183,61 +183,6 @@ fn a_corrupt_record_ends_the_journal_there() {
     assert!(rec.cut.unwrap().reason.contains("checksum"));
 }
 
-/// Damage in the middle of a journal, with whole records after it, is no
-/// torn write: the directory is refused with the offset and the count of
-/// records after it, and nothing on disk changes. `recover` then keeps
-/// every other record, names the lost message, and keeps the file as it
-/// was under a new name.
-#[test]
-fn a_damaged_record_with_whole_ones_after_it_is_refused_then_recovered() {
-    for (what, damage) in [("flip", 1usize), ("zero", 16)] {
-        let dir = temp_dir(&format!("damaged-{what}"));
-        let records = stream(20);
-        write_journal(&dir, &records);
-        let path = dir.join("journal");
-        let whole = std::fs::read(&path).unwrap();
-        // inside the 10th record (keyframe 5), 29 whole ones after it
-        let offsets = recovery::salvage::<Pose2>(&path).unwrap().unwrap().offsets;
-        let at = offsets[9] as usize + 12;
-        let mut bad = whole.clone();
-        for b in &mut bad[at..at + damage] {
-            *b = if damage == 1 { *b ^ 0x10 } else { 0 };
-        }
-        std::fs::write(&path, &bad).unwrap();
-        let err = StateDir::open::<Pose2>(&dir, &StateConfig::default())
-            .err()
-            .expect("refused");
-        assert!(
-            matches!(&err, StoreError::Damaged { offset, following: 29, .. } if *offset == offsets[9]),
-            "{what}: {err}"
-        );
-        assert!(err.to_string().contains("slamd recover --state"), "{err}");
-        assert_eq!(std::fs::read(&path).unwrap(), bad, "{what}: the journal changed");
-
-        let done = recovery::recover::<Pose2>(&dir).unwrap();
-        assert_eq!((done.kept, done.damage.len()), (records.len() - 1, 1), "{what}");
-        let lost = records[9].origin();
-        assert_eq!(
-            done.lost,
-            vec![recovery::Lost {
-                frontend: lost.frontend,
-                first: lost.sequence,
-                last: lost.sequence
-            }]
-        );
-        assert_eq!(
-            std::fs::read(done.moved_to.unwrap()).unwrap(),
-            bad,
-            "{what}: the old file kept"
-        );
-        let (_, rec) = StateDir::open::<Pose2>(&dir, &StateConfig::default()).unwrap();
-        let mut kept = records.clone();
-        kept.remove(9);
-        assert_eq!(rec.tail, kept, "{what}");
-        assert!(rec.cut.is_none());
-    }
-}
-
 #[test]
 fn another_format_version_is_refused_not_misread() {
     let dir = temp_dir("version");
@@ -538,3 +483,5 @@ fn a_3d_map_reads_back_and_a_2d_reader_refuses_it() {
         "{err}"
     );
 }
+
+mod damage;
