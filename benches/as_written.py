@@ -27,22 +27,7 @@ import argparse, math, sys
 
 import numpy as np
 
-
-def upper(values, n):
-    m, k = np.zeros((n, n)), 0
-    for r in range(n):
-        for c in range(r, n):
-            m[r, c] = m[c, r] = values[k]
-            k += 1
-    return m
-
-
-def positive_definite(m):
-    try:
-        np.linalg.cholesky(m)
-        return True
-    except np.linalg.LinAlgError:
-        return False
+from common import positive_definite, upper
 
 
 def quat_matrix(qx, qy, qz, qw):

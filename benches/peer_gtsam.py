@@ -45,8 +45,9 @@ reported as "fails (reason)" beside slamd's result.
 """
 import argparse, json, math, multiprocessing, os, subprocess, sys, tempfile, time
 
+from common import DATA, positive_definite, upper
+
 HERE = os.path.dirname(os.path.abspath(__file__))
-DATA = os.environ.get("SLAMD_DATASETS") or os.path.normpath(os.path.join(HERE, "..", "..", "shared", "datasets"))
 CASES = [  # file, optimum χ², ground truth
     ("manhattanolson3500_g2oversion.g2o", 146.077, "groundtruth/manhattanolson3500_nodes_groundtruth.dat"),
     ("city10000.g2o", 511.985, "groundtruth/city10000_groundtruth_isam.txt"),
@@ -112,28 +113,6 @@ def run_gtsam(path, repeat):
     return result, best, opt.iterations()
 
 
-def upper6(v):
-    """The symmetric 6×6 matrix of 21 upper-triangular entries, row by row."""
-    import numpy as np
-
-    m, k = np.zeros((6, 6)), 0
-    for r in range(6):
-        for c in range(r, 6):
-            m[r, c] = m[c, r] = v[k]
-            k += 1
-    return m
-
-
-def positive_definite(m):
-    import numpy as np
-
-    try:
-        np.linalg.cholesky(m)
-        return True
-    except np.linalg.LinAlgError:
-        return False
-
-
 def gtsam_information(omega_q):
     """g2o/slamd information over [Δt, Δq_xyz] → GTSAM's over [rotation vector; translation].
 
@@ -172,10 +151,10 @@ def read_3d(path):
         elif t[0] == "VERTEX3":
             vertices[int(t[1])] = rpy_pose(t[2:8])
         elif t[0] == "EDGE_SE3:QUAT":
-            omega = upper6(list(map(float, t[10:31])))
+            omega = upper(list(map(float, t[10:31])), 6)
             edges.append((int(t[1]), int(t[2]), quaternion_pose(t[3:10]), gtsam_information(omega)))
         elif t[0] == "EDGE3":
-            omega = upper6(list(map(float, t[9:30])))
+            omega = upper(list(map(float, t[9:30])), 6)
             omega_q = rpy_to_q[:, None] * omega * rpy_to_q[None, :]
             edges.append((int(t[1]), int(t[2]), rpy_pose(t[3:9]), gtsam_information(omega_q)))
     return vertices, edges
@@ -276,7 +255,7 @@ def without_invalid_edges(path):
     with tempfile.NamedTemporaryFile("w", suffix=".g2o", delete=False) as f:
         for line in open(path):
             t = line.split()
-            if t and t[0] == "EDGE_SE3:QUAT" and not positive_definite(upper6(list(map(float, t[10:31])))):
+            if t and t[0] == "EDGE_SE3:QUAT" and not positive_definite(upper(list(map(float, t[10:31])), 6)):
                 dropped += 1
                 continue
             f.write(line)

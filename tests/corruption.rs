@@ -69,6 +69,23 @@ fn manhattan(dir: &Path) -> Vec<Record> {
     records
 }
 
+/// Every damaged copy of `file` this test makes: at every 997th byte, one
+/// byte flipped, and separately 16 bytes zeroed (those that change it).
+fn damaged(file: &[u8]) -> impl Iterator<Item = (&'static str, usize, usize, Vec<u8>)> + '_ {
+    [("flip", 1usize), ("zero", 16)]
+        .into_iter()
+        .flat_map(move |(what, width)| {
+            (0..file.len()).step_by(997).filter_map(move |at| {
+                let mut bad = file.to_vec();
+                let end = (at + width).min(bad.len());
+                for b in &mut bad[at..end] {
+                    *b = if width == 1 { *b ^ 0x5a } else { 0 };
+                }
+                (bad != file).then_some((what, width, at, bad))
+            })
+        })
+}
+
 /// The records `recovered` lacks of `sent`, by message number, and
 /// whether each of them lies in a reported range.
 fn missing(sent: &[Record], recovered: &[Record], lost: &[Lost]) -> Vec<(u64, bool)> {
@@ -99,73 +116,63 @@ fn damage_anywhere_is_refused_unchanged_and_recovered_to_the_whole_graph() {
     let last_record = *offsets.last().unwrap() as usize;
     let dir = state_dir("damaged");
     let (mut cases, mut refused, mut torn, mut head) = (0, 0, 0, 0);
-    for (what, width) in [("flip", 1usize), ("zero", 16)] {
-        for at in (0..journal.len()).step_by(997) {
-            let mut bad = journal.clone();
-            let end = (at + width).min(bad.len());
-            for b in &mut bad[at..end] {
-                *b = if width == 1 { *b ^ 0x5a } else { 0 };
-            }
-            if bad == journal {
+    for (what, width, at, bad) in damaged(&journal) {
+        cases += 1;
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        std::fs::write(dir.join("map"), &map).unwrap();
+        std::fs::write(dir.join("journal"), &bad).unwrap();
+        match StateDir::open::<Pose2>(&dir, &StateConfig::default()) {
+            Ok((_, rec)) => {
+                // only the last record damaged: a torn tail, cut
+                assert!(at >= last_record, "{what} at {at}: read as a torn tail");
+                assert_eq!(rec.tail[..], sent[..sent.len() - 1], "{what} at {at}");
+                torn += 1;
                 continue;
             }
-            cases += 1;
-            let _ = std::fs::remove_dir_all(&dir);
-            std::fs::create_dir_all(&dir).unwrap();
-            std::fs::write(dir.join("map"), &map).unwrap();
-            std::fs::write(dir.join("journal"), &bad).unwrap();
-            match StateDir::open::<Pose2>(&dir, &StateConfig::default()) {
-                Ok((_, rec)) => {
-                    // only the last record damaged: a torn tail, cut
-                    assert!(at >= last_record, "{what} at {at}: read as a torn tail");
-                    assert_eq!(rec.tail[..], sent[..sent.len() - 1], "{what} at {at}");
-                    torn += 1;
-                    continue;
-                }
-                Err(StoreError::Damaged {
-                    offset, following, ..
-                }) => {
-                    assert!((offset as usize) < at + width && following > 0, "{what} at {at}");
-                    refused += 1;
-                }
-                Err(e) if at < 24 => {
-                    // the head: its magic, version or checksum refuses the file
-                    let refused_whole = matches!(
-                        e,
-                        StoreError::NotOurs { .. } | StoreError::Version { .. } | StoreError::Corrupt { .. }
-                    );
-                    assert!(refused_whole, "{what} at {at}: {e}");
-                    assert_eq!(std::fs::read(dir.join("journal")).unwrap(), bad, "{what} at {at}");
-                    head += 1;
-                    continue;
-                }
-                Err(e) => panic!("{what} at {at}: {e}"),
+            Err(StoreError::Damaged {
+                offset, following, ..
+            }) => {
+                assert!((offset as usize) < at + width && following > 0, "{what} at {at}");
+                refused += 1;
             }
-            assert_eq!(
-                std::fs::read(dir.join("journal")).unwrap(),
-                bad,
-                "{what} at {at}: changed"
-            );
-            assert_eq!(
-                std::fs::read(dir.join("map")).unwrap(),
-                map,
-                "{what} at {at}: map changed"
-            );
-
-            let done = recovery::recover::<Pose2>(&dir).unwrap();
-            let (_, rec) = StateDir::open::<Pose2>(&dir, &StateConfig::default()).expect("recovered");
-            let gone = missing(&sent, &rec.tail, &done.lost);
-            // a flipped byte loses its record, 16 zeroed bytes at most two
-            assert!(
-                !gone.is_empty() && gone.len() <= width.min(2),
-                "{what} at {at}: lost {gone:?}"
-            );
-            assert!(
-                gone.iter().all(|&(_, named)| named),
-                "{what} at {at}: unreported {gone:?}"
-            );
-            assert_eq!(done.kept, sent.len() - gone.len());
+            Err(e) if at < 24 => {
+                // the head: its magic, version or checksum refuses the file
+                let refused_whole = matches!(
+                    e,
+                    StoreError::NotOurs { .. } | StoreError::Version { .. } | StoreError::Corrupt { .. }
+                );
+                assert!(refused_whole, "{what} at {at}: {e}");
+                assert_eq!(std::fs::read(dir.join("journal")).unwrap(), bad, "{what} at {at}");
+                head += 1;
+                continue;
+            }
+            Err(e) => panic!("{what} at {at}: {e}"),
         }
+        assert_eq!(
+            std::fs::read(dir.join("journal")).unwrap(),
+            bad,
+            "{what} at {at}: changed"
+        );
+        assert_eq!(
+            std::fs::read(dir.join("map")).unwrap(),
+            map,
+            "{what} at {at}: map changed"
+        );
+
+        let done = recovery::recover::<Pose2>(&dir).unwrap();
+        let (_, rec) = StateDir::open::<Pose2>(&dir, &StateConfig::default()).expect("recovered");
+        let gone = missing(&sent, &rec.tail, &done.lost);
+        // a flipped byte loses its record, 16 zeroed bytes at most two
+        assert!(
+            !gone.is_empty() && gone.len() <= width.min(2),
+            "{what} at {at}: lost {gone:?}"
+        );
+        assert!(
+            gone.iter().all(|&(_, named)| named),
+            "{what} at {at}: unreported {gone:?}"
+        );
+        assert_eq!(done.kept, sent.len() - gone.len());
     }
     // every offset but the head's and the last record's is corruption
     assert_eq!(cases, refused + torn + head);
@@ -184,36 +191,26 @@ fn a_damaged_map_is_refused_unchanged() {
     let map = std::fs::read(clean.join("map")).unwrap();
     let journal = std::fs::read(clean.join("journal")).unwrap();
     let dir = state_dir("map-damaged");
-    for (what, width) in [("flip", 1usize), ("zero", 16)] {
-        for at in (0..map.len()).step_by(997) {
-            let mut bad = map.clone();
-            let end = (at + width).min(bad.len());
-            for b in &mut bad[at..end] {
-                *b = if width == 1 { *b ^ 0x5a } else { 0 };
-            }
-            if bad == map {
-                continue;
-            }
-            let _ = std::fs::remove_dir_all(&dir);
-            std::fs::create_dir_all(&dir).unwrap();
-            std::fs::write(dir.join("map"), &bad).unwrap();
-            std::fs::write(dir.join("journal"), &journal).unwrap();
-            let err = StateDir::open::<Pose2>(&dir, &StateConfig::default()).err();
-            let err = err.unwrap_or_else(|| panic!("{what} at {at}: a damaged map was taken"));
-            let named = match &err {
-                StoreError::Corrupt { path, .. }
-                | StoreError::NotOurs { path, .. }
-                | StoreError::Version { path, .. } => path.clone(),
-                other => panic!("{what} at {at}: {other}"),
-            };
-            assert_eq!(named, dir.join("map"), "{what} at {at}");
-            assert_eq!(std::fs::read(dir.join("map")).unwrap(), bad, "{what} at {at}");
-            assert_eq!(
-                std::fs::read(dir.join("journal")).unwrap(),
-                journal,
-                "{what} at {at}"
-            );
-        }
+    for (what, _, at, bad) in damaged(&map) {
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        std::fs::write(dir.join("map"), &bad).unwrap();
+        std::fs::write(dir.join("journal"), &journal).unwrap();
+        let err = StateDir::open::<Pose2>(&dir, &StateConfig::default()).err();
+        let err = err.unwrap_or_else(|| panic!("{what} at {at}: a damaged map was taken"));
+        let named = match &err {
+            StoreError::Corrupt { path, .. }
+            | StoreError::NotOurs { path, .. }
+            | StoreError::Version { path, .. } => path.clone(),
+            other => panic!("{what} at {at}: {other}"),
+        };
+        assert_eq!(named, dir.join("map"), "{what} at {at}");
+        assert_eq!(std::fs::read(dir.join("map")).unwrap(), bad, "{what} at {at}");
+        assert_eq!(
+            std::fs::read(dir.join("journal")).unwrap(),
+            journal,
+            "{what} at {at}"
+        );
     }
 }
 
