@@ -421,6 +421,9 @@ fn keep(from: &Path, to: &Path) -> Result<(), StoreError> {
         .map_err(|e| StoreError::io("keep a copy of", from, e))
 }
 
+/// How long taking a state directory's lock waits for another holder.
+const LOCK_PATIENCE: Duration = Duration::from_millis(500);
+
 /// Takes the directory's lock file, or fails if another process holds it.
 pub(super) fn lock(dir: &Path) -> Result<File, StoreError> {
     use std::os::fd::AsRawFd;
@@ -431,12 +434,21 @@ pub(super) fn lock(dir: &Path) -> Result<File, StoreError> {
         .write(true)
         .open(&path)
         .map_err(|e| StoreError::io("create", &path, e))?;
-    // SAFETY: flock on a descriptor this function owns; no memory is shared.
-    let r = unsafe { libc::flock(f.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) };
-    if r != 0 {
-        return Err(StoreError::Locked(dir.to_path_buf()));
+    // A process that forks while holding the lock leaves a copy of the
+    // descriptor in the child until it execs, so a lock just released can
+    // still be held for a moment: try again for a while before refusing.
+    let deadline = std::time::Instant::now() + LOCK_PATIENCE;
+    loop {
+        // SAFETY: flock on a descriptor this function owns; no memory is shared.
+        let r = unsafe { libc::flock(f.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) };
+        if r == 0 {
+            return Ok(f);
+        }
+        if std::time::Instant::now() >= deadline {
+            return Err(StoreError::Locked(dir.to_path_buf()));
+        }
+        std::thread::sleep(Duration::from_millis(5));
     }
-    Ok(f)
 }
 
 #[cfg(test)]
