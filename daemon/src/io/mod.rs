@@ -13,6 +13,7 @@ mod gps_csv;
 mod isam;
 mod poses;
 mod spatial;
+#[cfg(feature = "svg")]
 pub mod svg;
 mod toro;
 mod trajectory;
