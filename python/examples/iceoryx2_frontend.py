@@ -435,7 +435,7 @@ class Replay:
             if now - waiting >= self.timeout_s and (said is None or now - said >= SAY_EVERY_S):
                 said = now
                 why = ("holds its acknowledgements: its journal cannot be written (a full disk?)"
-                       if self.link.holding else "has not acknowledged")
+                       if self.link.holding else "has not acknowledged yet")
                 print(f"the daemon serving `{self.link.ns}` is alive but {why}; waiting "
                       f"({now - waiting:.0f} s so far)", file=sys.stderr)
             self.collect(min(left, SAY_EVERY_S))

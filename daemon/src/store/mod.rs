@@ -18,8 +18,9 @@
 //! On start, [`StateDir::open`] reads both: the journal's records, a torn
 //! last record cut off with a warning, and the map. A damaged record with
 //! whole records after it is corruption: the directory is refused,
-//! unchanged, until [`recovery::recover`] has kept what can be verified. A file of another format version is refused, never
-//! misread. The formats are in docs/daemon.md, "State directory".
+//! unchanged, until [`recovery::recover`] has kept what can be verified.
+//! A file of another format version is refused, never misread. The
+//! formats are in docs/daemon.md, "State directory".
 
 mod bytes;
 pub mod journal;
@@ -276,7 +277,11 @@ impl StateDir {
         // it and the two journals since, where they are whole
         let (map, before, damaged_map) = match map.transpose() {
             Ok(map) => (map, Vec::new(), false),
-            Err(e @ (StoreError::Corrupt { .. } | StoreError::NotOurs { .. })) => {
+            // a damaged head can read as another version; a map truly of
+            // another one has no readable `map.prev` either
+            Err(
+                e @ (StoreError::Corrupt { .. } | StoreError::NotOurs { .. } | StoreError::Version { .. }),
+            ) => {
                 let Some((previous, records)) = recovery::previous_checkpoint::<P>(dir) else {
                     return Err(e);
                 };

@@ -44,7 +44,7 @@ fn report(r: &Recovery) -> String {
     }
     for l in &r.lost {
         out.push_str(&format!(
-            "  lost: frontend {} messages {}..={} (a frontend cannot send these again: they were acknowledged)\n",
+            "  lost: frontend {} messages {}..={} (acknowledged, so no frontend sends them again by itself)\n",
             l.frontend, l.first, l.last
         ));
     }

@@ -218,7 +218,7 @@ impl DaemonSink {
         let why = if self.holding {
             "holds its acknowledgements: its journal cannot be written (a full disk?)"
         } else {
-            "has not acknowledged"
+            "has not acknowledged yet"
         };
         eprintln!(
             "slamd: the daemon serving `{}` is alive but {why}; waiting ({:.0} s so far)",
