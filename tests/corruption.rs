@@ -35,23 +35,20 @@ fn manhattan(dir: &Path) -> Vec<Record> {
     let groups = g.by_newer();
     let mut sequence = 0;
     let mut records = Vec::new();
-    for (k, group) in groups.iter().enumerate() {
+    let mut next = || {
         sequence += 1;
-        let origin = Origin {
+        Origin {
             frontend: FRONTEND,
             sequence,
-        };
-        if k < half {
-            continue;
         }
-        records.push(Record::Keyframe(origin, g.id_of(k), None, 0));
-        for &e in group {
-            sequence += 1;
-            let origin = Origin {
-                frontend: FRONTEND,
-                sequence,
-            };
-            records.push(Record::Edge(origin, g.edge_input(e)));
+    };
+    // the frontend numbered the checkpoint's messages too
+    for (k, group) in groups.iter().enumerate() {
+        let origin = next();
+        let edges = group.iter().map(|&e| (next(), e)).collect::<Vec<_>>();
+        if k >= half {
+            records.push(Record::Keyframe(origin, g.id_of(k), None, 0));
+            records.extend(edges.into_iter().map(|(o, e)| Record::Edge(o, g.edge_input(e))));
         }
     }
     // the checkpoint took every message before the journal's first
