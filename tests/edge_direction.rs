@@ -12,10 +12,10 @@
 //!   cost of the edges as written, evaluated here from the poses alone, and
 //!   the χ² slamd reports is that cost.
 
-use nalgebra::{Matrix3, Matrix6, UnitQuaternion, Vector3};
+use nalgebra::{Matrix3, Matrix6, SMatrix, SVector, UnitQuaternion, Vector3, Vector6};
 use proptest::prelude::*;
 use slamd::engine::EngineConfig;
-use slamd::geometry::Pose2;
+use slamd::geometry::{wrap_angle, Pose2};
 use slamd::graph::{EdgeKind, Information, Information6, Pose3, PoseGraph};
 use slamd::solver::{solve_batch, solve_batch3, BatchOptions};
 use slamd_tests::{max_pose_error, replay, walk};
@@ -46,8 +46,8 @@ fn adjoint(z: &Pose2) -> Matrix3<f64> {
     Matrix3::new(c, -s, z.y, s, c, -z.x, 0.0, 0.0, 1.0)
 }
 
-fn upper(m: &Matrix3<f64>) -> Information {
-    Information::from_upper([m[(0, 0)], m[(0, 1)], m[(0, 2)], m[(1, 1)], m[(1, 2)], m[(2, 2)]]).expect("SPD")
+fn information(m: &Matrix3<f64>) -> Information {
+    Information::from_matrix(m).expect("SPD")
 }
 
 /// Three quarter turns of 2 m, odometry off by about 1e-5, and a loop
@@ -80,17 +80,17 @@ fn an_anisotropic_loop_closure_means_the_same_written_either_way() {
     let z = loop_closure();
     let omega = Matrix3::from_diagonal(&Vector3::new(1e4, 1.0, 50.0));
     let newer_first = three_quarters_with(|g| {
-        g.add_edge(3, 0, z, upper(&omega), EdgeKind::LoopClosure)
+        g.add_edge(3, 0, z, information(&omega), EdgeKind::LoopClosure)
             .expect("valid edge");
     });
     let ad_inv = adjoint(&z).try_inverse().expect("invertible");
     let turned = ad_inv.transpose() * omega * ad_inv;
     let older_first = three_quarters_with(|g| {
-        g.add_edge(0, 3, z.inverse(), upper(&turned), EdgeKind::LoopClosure)
+        g.add_edge(0, 3, z.inverse(), information(&turned), EdgeKind::LoopClosure)
             .expect("valid edge");
     });
     let kept = three_quarters_with(|g| {
-        g.add_edge(0, 3, z.inverse(), upper(&omega), EdgeKind::LoopClosure)
+        g.add_edge(0, 3, z.inverse(), information(&omega), EdgeKind::LoopClosure)
             .expect("valid edge");
     });
     for (what, solve) in [
@@ -114,38 +114,29 @@ fn an_anisotropic_loop_closure_means_the_same_written_either_way() {
 /// g2o's 2-D error of `(Z, xi, xj)` as written: `t2v(Z⁻¹ X_i⁻¹ X_j)`.
 fn error2(z: &Pose2, xi: &Pose2, xj: &Pose2) -> Vector3<f64> {
     let d = z.inverse().compose(&xi.inverse().compose(xj));
-    let t = d.theta.sin().atan2(d.theta.cos());
-    Vector3::new(d.x, d.y, t)
-}
-
-type Written2 = (usize, usize, Pose2, Matrix3<f64>);
-
-fn cost2(edges: &[Written2], poses: &[Pose2]) -> f64 {
-    edges
-        .iter()
-        .map(|(i, j, z, o)| {
-            let e = error2(z, &poses[*i], &poses[*j]);
-            e.dot(&(o * e))
-        })
-        .sum()
+    Vector3::new(d.x, d.y, wrap_angle(d.theta))
 }
 
 /// g2o's 3-D error as written: `[Δt, Δq_xyz]` of `Δ = Z⁻¹ X_i⁻¹ X_j`, `w ≥ 0`.
-fn error3(z: &Pose3, xi: &Pose3, xj: &Pose3) -> nalgebra::Vector6<f64> {
+fn error3(z: &Pose3, xi: &Pose3, xj: &Pose3) -> Vector6<f64> {
     let d = z.inverse().compose(&xi.inverse().compose(xj));
-    let q = d.rotation.into_inner();
-    let s = if q.w < 0.0 { -1.0 } else { 1.0 };
-    let t = d.translation;
-    nalgebra::Vector6::new(t.x, t.y, t.z, s * q.i, s * q.j, s * q.k)
+    let (t, q) = (d.translation, d.canonical_quaternion());
+    Vector6::new(t.x, t.y, t.z, q.i, q.j, q.k)
 }
 
-type Written3 = (usize, usize, Pose3, Matrix6<f64>);
+/// An edge as written: `(i, j, Z, Ω)`, over an error of `N` numbers.
+type Written<P, const N: usize> = (usize, usize, P, SMatrix<f64, N, N>);
 
-fn cost3(edges: &[Written3], poses: &[Pose3]) -> f64 {
+/// `Σ eᵀ Ω e` of `edges` at `poses`, with `error` g2o's error of one edge.
+fn cost<P, const N: usize>(
+    edges: &[Written<P, N>],
+    poses: &[P],
+    error: fn(&P, &P, &P) -> SVector<f64, N>,
+) -> f64 {
     edges
         .iter()
         .map(|(i, j, z, o)| {
-            let e = error3(z, &poses[*i], &poses[*j]);
+            let e = error(z, &poses[*i], &poses[*j]);
             e.dot(&(o * e))
         })
         .sum()
@@ -217,21 +208,21 @@ proptest! {
             let exact = truth[i].between(&truth[j]);
             let at = |r: usize| noise[(3 * k + r) % noise.len()];
             let z = Pose2::new(exact.x + at(0), exact.y + at(1), exact.theta + at(2));
-            g.add_edge(i as u64, j as u64, z, upper(&omega), EdgeKind::from_ids(i as u64, j as u64))
+            g.add_edge(i as u64, j as u64, z, information(&omega), EdgeKind::from_ids(i as u64, j as u64))
                 .expect("valid edge");
             written.push((i, j, z, omega));
         }
         let options = BatchOptions { polish: true, ..Default::default() };
         let s = solve_batch(&g, &options).expect("connected");
-        let cost = cost2(&written, &s.poses);
-        prop_assert!((s.chi2 - cost).abs() <= 1e-9 * (1.0 + cost), "slamd χ² {} vs as written {cost}", s.chi2);
+        let chi2 = cost(&written, &s.poses, error2);
+        prop_assert!((s.chi2 - chi2).abs() <= 1e-9 * (1.0 + chi2), "slamd χ² {} vs as written {chi2}", s.chi2);
         let bump = |p: &Pose2, c: usize, h: f64| {
             let mut v = p.to_array();
             v[c] += h;
             Pose2::new(v[0], v[1], v[2])
         };
-        let slope = gradient(&s.poses, |p| cost2(&written, p), bump, 3);
-        prop_assert!(slope < 1e-4 * (1.0 + cost), "slope {slope:e} at χ² {cost}");
+        let slope = gradient(&s.poses, |p| cost(&written, p, error2), bump, 3);
+        prop_assert!(slope < 1e-4 * (1.0 + chi2), "slope {slope:e} at χ² {chi2}");
     }
 
     /// 3-D: the same, with g2o's quaternion error.
@@ -247,13 +238,13 @@ proptest! {
             truth.push(last.compose(&Pose3::from_xyz_rpy(*s)));
         }
         let n = truth.len();
-        let odometry = Matrix6::from_diagonal(&nalgebra::Vector6::new(50.0, 50.0, 50.0, 400.0, 400.0, 400.0));
+        let odometry = Matrix6::from_diagonal(&Vector6::new(50.0, 50.0, 50.0, 400.0, 400.0, 400.0));
         let mut pairs: Vec<(usize, usize, Matrix6<f64>)> = (1..n).map(|k| (k - 1, k, odometry)).collect();
         for &(a, b, spread) in &loops {
             let (a, b) = (a % n, b % n);
             if a.abs_diff(b) > 1 {
                 let scale = 10f64.powf(spread);
-                let info = Matrix6::from_diagonal(&nalgebra::Vector6::new(scale, 1.0, 5.0, 100.0, 30.0, 300.0));
+                let info = Matrix6::from_diagonal(&Vector6::new(scale, 1.0, 5.0, 100.0, 30.0, 300.0));
                 pairs.push((a.max(b), a.min(b), info));
             }
         }
@@ -266,22 +257,14 @@ proptest! {
             let at = |r: usize| noise[(6 * k + r) % noise.len()];
             let wobble = Pose3::from_xyz_rpy([at(0), at(1), at(2), at(3), at(4), at(5)]);
             let z = truth[i].between(&truth[j]).compose(&wobble);
-            let mut u = [0.0; 21];
-            let mut idx = 0;
-            for r in 0..6 {
-                for c in r..6 {
-                    u[idx] = omega[(r, c)];
-                    idx += 1;
-                }
-            }
-            g.add_edge(i as u64, j as u64, z, Information6::from_upper(u).expect("SPD"), EdgeKind::from_ids(i as u64, j as u64))
+            g.add_edge(i as u64, j as u64, z, Information6::from_matrix(&omega).expect("SPD"), EdgeKind::from_ids(i as u64, j as u64))
                 .expect("valid edge");
             written.push((i, j, z, omega));
         }
         let options = BatchOptions { polish: true, ..Default::default() };
         let s = solve_batch3(&g, &options).expect("connected");
-        let cost = cost3(&written, &s.poses);
-        prop_assert!((s.chi2 - cost).abs() <= 1e-9 * (1.0 + cost), "slamd χ² {} vs as written {cost}", s.chi2);
+        let chi2 = cost(&written, &s.poses, error3);
+        prop_assert!((s.chi2 - chi2).abs() <= 1e-9 * (1.0 + chi2), "slamd χ² {} vs as written {chi2}", s.chi2);
         let bump = |p: &Pose3, c: usize, h: f64| {
             let mut t = p.translation;
             let mut r = p.rotation;
@@ -294,7 +277,7 @@ proptest! {
             }
             Pose3::new(t, r)
         };
-        let slope = gradient(&s.poses, |p| cost3(&written, p), bump, 6);
-        prop_assert!(slope < 1e-4 * (1.0 + cost), "slope {slope:e} at χ² {cost}");
+        let slope = gradient(&s.poses, |p| cost(&written, p, error3), bump, 6);
+        prop_assert!(slope < 1e-4 * (1.0 + chi2), "slope {slope:e} at χ² {chi2}");
     }
 }
