@@ -13,18 +13,12 @@ use slamd::geometry::Pose2;
 use slamd::store::recovery::{self, Lost};
 use slamd::store::{MapFile, Record, StateConfig, StateDir, StoreError};
 use slamd_protocol::codec::Origin;
-use slamd_tests::{optimum, read, slamd_bin};
+use slamd_tests::{fresh_dir, optimum, read, slamd_bin};
 use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Command;
 
 const FRONTEND: u32 = 7;
-
-fn state_dir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("slamd-corruption-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    d
-}
 
 /// The checkpoint and the journal's records, as written.
 fn manhattan(dir: &Path) -> Vec<Record> {
@@ -102,7 +96,7 @@ fn missing(sent: &[Record], recovered: &[Record], lost: &[Lost]) -> Vec<(u64, bo
 
 #[test]
 fn damage_anywhere_is_refused_unchanged_and_recovered_to_the_whole_graph() {
-    let clean = state_dir("clean");
+    let clean = fresh_dir("corruption-clean");
     let sent = manhattan(&clean);
     let journal = std::fs::read(clean.join("journal")).unwrap();
     let map = std::fs::read(clean.join("map")).unwrap();
@@ -111,7 +105,7 @@ fn damage_anywhere_is_refused_unchanged_and_recovered_to_the_whole_graph() {
         .unwrap()
         .offsets;
     let last_record = *offsets.last().unwrap() as usize;
-    let dir = state_dir("damaged");
+    let dir = fresh_dir("corruption-damaged");
     let (mut cases, mut refused, mut torn, mut head) = (0, 0, 0, 0);
     for (what, width, at, bad) in damaged(&journal) {
         cases += 1;
@@ -183,11 +177,11 @@ fn damage_anywhere_is_refused_unchanged_and_recovered_to_the_whole_graph() {
 /// (`store::tests::damage` has the fall-back).
 #[test]
 fn a_damaged_map_is_refused_unchanged() {
-    let clean = state_dir("map-clean");
+    let clean = fresh_dir("corruption-map-clean");
     manhattan(&clean);
     let map = std::fs::read(clean.join("map")).unwrap();
     let journal = std::fs::read(clean.join("journal")).unwrap();
-    let dir = state_dir("map-damaged");
+    let dir = fresh_dir("corruption-map-damaged");
     for (what, _, at, bad) in damaged(&map) {
         let _ = std::fs::remove_dir_all(&dir);
         std::fs::create_dir_all(&dir).unwrap();
@@ -217,7 +211,7 @@ fn a_damaged_map_is_refused_unchanged() {
 /// Manhattan's whole graph, which solves to its optimum.
 #[test]
 fn the_daemon_refuses_and_slamd_recover_reports() {
-    let dir = state_dir("binary");
+    let dir = fresh_dir("corruption-binary");
     let sent = manhattan(&dir);
     let path = dir.join("journal");
     let offsets = recovery::salvage::<Pose2>(&path).unwrap().unwrap().offsets;

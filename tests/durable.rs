@@ -4,16 +4,10 @@
 use crate::daemon::Daemon;
 use slamd::geometry::Pose2;
 use slamd::store::MapFile;
-use slamd_tests::{dataset, read, slamd_bin};
+use slamd_tests::{dataset, fresh_dir, read, slamd_bin};
 use std::path::PathBuf;
 use std::process::{Command, Stdio};
 use std::time::Duration;
-
-fn state_dir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("slamd-durable-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    d
-}
 
 /// Intel streamed at 800 keyframes a second through a daemon that is
 /// SIGKILLed twice mid-stream and restarted on the same state directory:
@@ -21,7 +15,7 @@ fn state_dir(name: &str) -> PathBuf {
 /// daemon leaves on SIGTERM holds every keyframe and edge of the file.
 #[test]
 fn a_stream_survives_two_daemon_kills_and_ends_at_the_optimum() {
-    let dir = state_dir("kills");
+    let dir = fresh_dir("durable-kills");
     let dir_arg = dir.to_str().unwrap().to_string();
     let namespace = format!("slamd-test-{}-kills", std::process::id());
     let args = ["--state", dir_arg.as_str()];
@@ -62,7 +56,7 @@ fn a_stream_survives_two_daemon_kills_and_ends_at_the_optimum() {
 /// which map goes on would be a guess.
 #[test]
 fn a_second_map_for_a_state_directory_is_refused() {
-    let dir = state_dir("two-maps");
+    let dir = fresh_dir("durable-two-maps");
     std::fs::create_dir_all(&dir).unwrap();
     let mut map = MapFile::default();
     map.keyframes.push(slamd::store::MapKeyframe {
@@ -183,7 +177,7 @@ impl Drop for Tmpfs {
 /// optimum with every keyframe.
 #[test]
 fn a_full_disk_holds_the_stream_until_space_returns() {
-    let mount = state_dir("full-disk");
+    let mount = fresh_dir("durable-full-disk");
     let tmpfs = Tmpfs::mount(&mount, "300k");
     let state = mount.join("state");
     let namespace = format!("slamd-test-{}-full-disk", std::process::id());

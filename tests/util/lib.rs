@@ -112,6 +112,14 @@ pub fn relative_pose_error(a: &[Pose2], truth: &[Pose2]) -> f64 {
         .fold(0.0, f64::max)
 }
 
+/// A directory path under the system's temporary directory named for the
+/// test and this process, removed if a run before left it.
+pub fn fresh_dir(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("slamd-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    d
+}
+
 /// The `slamd` binary of this workspace, built once per test run.
 pub fn slamd_bin() -> PathBuf {
     static BIN: OnceLock<PathBuf> = OnceLock::new();
