@@ -68,7 +68,8 @@ def homogeneous3(x, y, z, qx, qy, qz, qw):
 
 
 def read_graph(path):
-    """(dimension, edges [(i, j, Z as a homogeneous matrix, Ω)], skipped)."""
+    """(dimension, edges [(i, j, Z⁻¹ as a homogeneous matrix, Ω)], skipped):
+    Z inverted once here, since every error evaluation needs Z⁻¹."""
     edges, skipped, dim = [], 0, None
     for line in open(path):
         t = line.split()
@@ -85,7 +86,7 @@ def read_graph(path):
         if not positive_definite(omega):
             skipped += 1
             continue
-        edges.append((int(t[1]), int(t[2]), z, omega))
+        edges.append((int(t[1]), int(t[2]), np.linalg.inv(z), omega))
     if dim is None:
         sys.exit(f"{path}: no EDGE_SE2 or EDGE_SE3:QUAT lines")
     return dim, edges, skipped
@@ -104,8 +105,9 @@ def read_poses(path, dim):
     return poses
 
 
-def error(dim, z, xi, xj):
-    d = np.linalg.inv(z) @ np.linalg.inv(xi) @ xj
+def error(dim, z_inv, xi, xj):
+    """g2o's error of an edge whose measurement's inverse is `z_inv`."""
+    d = z_inv @ np.linalg.inv(xi) @ xj
     if dim == 2:
         th = math.atan2(d[1, 0], d[0, 0])
         return np.array([d[0, 2], d[1, 2], th])
@@ -115,8 +117,8 @@ def error(dim, z, xi, xj):
 
 def chi2(dim, edges, poses):
     total = 0.0
-    for i, j, z, omega in edges:
-        e = error(dim, z, poses[i], poses[j])
+    for i, j, z_inv, omega in edges:
+        e = error(dim, z_inv, poses[i], poses[j])
         total += float(e @ omega @ e)
     return total
 
@@ -158,14 +160,16 @@ def levenberg_marquardt(dim, edges, poses, iterations=30):
     first_gradient, lam = None, 1e-6
     for _ in range(iterations):
         rows, cols, vals, g = [], [], [], np.zeros(size)
-        for i, j, z, omega in edges:
-            e = error(dim, z, poses[i], poses[j])
+        for i, j, z_inv, omega in edges:
+            e = error(dim, z_inv, poses[i], poses[j])
             jac = np.zeros((dof, 2 * dof))
             for side, k in enumerate((i, j)):
                 for c in range(dof):
-                    plus = error(dim, z, *((moved(dim, poses[i], c, h), poses[j]) if side == 0 else (poses[i], moved(dim, poses[j], c, h))))
-                    minus = error(dim, z, *((moved(dim, poses[i], c, -h), poses[j]) if side == 0 else (poses[i], moved(dim, poses[j], c, -h))))
-                    d = plus - minus
+                    def at(step):
+                        ends = [poses[i], poses[j]]
+                        ends[side] = moved(dim, poses[k], c, step)
+                        return error(dim, z_inv, *ends)
+                    d = at(h) - at(-h)
                     if dim == 2:
                         d[2] = (d[2] + math.pi) % (2 * math.pi) - math.pi
                     jac[:, side * dof + c] = d / (2 * h)

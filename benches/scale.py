@@ -21,13 +21,18 @@ from common import HERE
 BIN = os.environ.get("SLAMD_BIN") or os.path.join(HERE, "..", "target", "release", "slamd")
 
 
+def peak_rss(time_report):
+    """Peak RSS in MiB from what `/usr/bin/time -v` wrote."""
+    rss = re.search(r"Maximum resident set size \(kbytes\): (\d+)", time_report)
+    return int(rss.group(1)) / 1024 if rss else float("nan")
+
+
 def timed(argv):
     """(stdout, peak RSS in MiB) of argv run under /usr/bin/time -v."""
     p = subprocess.run(["/usr/bin/time", "-v", *argv], capture_output=True, text=True)
     if p.returncode != 0:
         sys.exit(f"{' '.join(argv)} failed: {p.stderr.strip().splitlines()[-1:]}")
-    rss = re.search(r"Maximum resident set size \(kbytes\): (\d+)", p.stderr)
-    return p.stdout, int(rss.group(1)) / 1024 if rss else float("nan")
+    return p.stdout, peak_rss(p.stderr)
 
 
 def last_json(text):
@@ -55,8 +60,7 @@ def through_daemon(world, tmp, n):
     _, err = daemon.communicate(timeout=600)
     if out.returncode != 0:
         sys.exit(f"replay of {world} failed: {out.stderr.strip()}")
-    rss = re.search(r"Maximum resident set size \(kbytes\): (\d+)", err)
-    return last_json(out.stdout), int(rss.group(1)) / 1024 if rss else float("nan")
+    return last_json(out.stdout), peak_rss(err)
 
 
 def main():
