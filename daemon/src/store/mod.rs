@@ -295,7 +295,9 @@ impl StateDir {
             Err(e) => return Err(e),
         };
         // the journal that follows the map (after a fall-back: the damaged one)
-        let generation = map.as_ref().map_or(0, |m| m.generation + u64::from(damaged_map));
+        let generation = map
+            .as_ref()
+            .map_or(0, |m| m.generation.saturating_add(u64::from(damaged_map)));
         let interval = Duration::from_millis(config.sync_interval_ms);
         let mut recovered = Recovered {
             map,

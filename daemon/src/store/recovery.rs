@@ -338,10 +338,10 @@ impl<P: RigidMotion> Salvage<P> {
         }
         last.into_iter()
             .filter_map(|(frontend, l)| {
-                let f = *first.get(&frontend)?;
-                (f > l + 1).then_some(Lost {
+                let (f, next) = (*first.get(&frontend)?, l.checked_add(1)?);
+                (f > next).then_some(Lost {
                     frontend,
-                    first: l + 1,
+                    first: next,
                     last: f - 1,
                 })
             })
