@@ -93,8 +93,17 @@ fn a_building_streams_through_a_3d_daemon_and_survives_a_restart() {
         let poses: Option<Vec<Pose3>> = poses.iter().copied().collect();
         poses.map_or(f64::INFINITY, |p| slamd::graph::chi2(g, &p))
     };
+    // (the snapshots on the way there, as the filter's decisions come in,
+    // may already be within 0.1% in χ² but not in the poses)
+    let at_optimum = |poses: &[Option<Pose3>]| {
+        poses.iter().zip(&best.poses).all(|(p, b)| {
+            p.is_some_and(|p| {
+                (p.translation - b.translation).norm() < 1e-3 && p.rotation.angle_to(&b.rotation) < 1e-4
+            })
+        })
+    };
     let (poses, header) = wait_until(&snaps, f.id(), seq, |p, h| {
-        h.keyframes == n as u64 && chi2_all(p) <= 1.001 * best.chi2
+        h.keyframes == n as u64 && chi2_all(p) <= 1.001 * best.chi2 && at_optimum(p)
     });
     assert_eq!((header.dimension, header.poses), (3, n as u64));
     assert_eq!((header.edges, header.rejected), (g.edges().len() as u64, 0));
@@ -103,12 +112,7 @@ fn a_building_streams_through_a_3d_daemon_and_survives_a_restart() {
         "{}",
         header.chi2
     );
-    for (k, p) in poses.iter().enumerate() {
-        let (p, b) = (p.expect("every keyframe"), best.poses[k]);
-        let dp = (p.translation - b.translation).norm();
-        assert!(dp < 1e-3, "keyframe {k} is {dp} m from the batch optimum");
-        assert!(p.rotation.angle_to(&b.rotation) < 1e-4, "keyframe {k}");
-    }
+    assert_eq!(header.pending, 0);
 
     // a 2-D keyframe is refused with the reason, the map untouched
     let wrong = f.add_keyframe(9999, 0, None).unwrap();

@@ -11,6 +11,7 @@ mod fuzz;
 mod gps;
 mod gps3;
 mod incremental;
+mod judge;
 mod marginals;
 mod outliers;
 mod restore;

@@ -37,12 +37,12 @@ pub fn pose_out<P: RigidMotion>(id: KeyframeId, p: &P, timestamp_ns: u64, georef
 
 /// The filter's switch `weight` of the loop closure `from → to` that
 /// frontend message `o` carried.
-pub fn switch_out(from: KeyframeId, to: KeyframeId, o: Origin, weight: f64) -> Switch {
+pub fn switch_out(from: KeyframeId, to: KeyframeId, o: Origin, weight: f64, pending: bool) -> Switch {
     Switch {
         from,
         to,
         frontend: o.frontend,
-        reserved: 0,
+        pending: u32::from(pending),
         sequence: o.sequence,
         weight,
     }

@@ -197,12 +197,13 @@ pub struct Switch {
     pub to: u64,
     /// The frontend that sent it (0: unknown).
     pub frontend: u32,
-    /// Zero.
-    pub reserved: u32,
+    /// 1 while the filter has not decided it: it is held out of the
+    /// estimate, at weight 0.
+    pub pending: u32,
     /// Its message number.
     pub sequence: u64,
     /// The switch `s ∈ [0, 1]`: the edge's information counts `s²` times;
-    /// below 0.5 the filter holds it wrong.
+    /// below 0.5 (and not pending) the filter holds it wrong.
     pub weight: f64,
 }
 
@@ -214,13 +215,13 @@ pub struct Switch {
 pub struct SwitchesHeader {
     /// [`PROTOCOL_VERSION`] of the daemon.
     pub protocol: u32,
-    /// Zero.
-    pub reserved: u32,
+    /// How many of them are pending.
+    pub pending: u32,
     /// The snapshot version these weights belong to.
     pub version: u64,
     /// Number of switches that follow.
     pub count: u64,
-    /// How many of them are below 0.5.
+    /// How many of them are decided and below 0.5.
     pub rejected: u64,
 }
 
@@ -328,8 +329,9 @@ pub struct SnapshotHeader {
     /// `covariance_keyframe`, the newest in the snapshot (the daemon's
     /// `snapshot.covariance` setting).
     pub has_covariance: u32,
-    /// Zero.
-    pub reserved: u32,
+    /// Loop closures held out of the estimate until the outlier filter
+    /// decides them (0 from a daemon that holds none).
+    pub pending: u32,
     /// The keyframe whose covariance `covariance` is.
     pub covariance_keyframe: u64,
     /// Its covariance's upper triangle row by row, in the pose's own frame

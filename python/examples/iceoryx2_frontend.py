@@ -85,7 +85,7 @@ class SnapshotHeader(ctypes.Structure):
                 ("held", U64), ("resolves", U64), ("fixes", U64),
                 ("georeferenced", U32), ("has_origin", U32),
                 ("origin", F64 * 3), ("acks", FrontendAck * 8),
-                ("has_covariance", U32), ("reserved", U32),
+                ("has_covariance", U32), ("pending", U32),
                 ("covariance_keyframe", U64), ("covariance", F64 * 21)]
 
 

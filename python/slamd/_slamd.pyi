@@ -42,6 +42,7 @@ class Snapshot:
     resolves: int
     keyframes: int
     edges: int
+    pending: int
     ids: npt.NDArray[np.uint64]
     poses: npt.NDArray[np.float64]
     timestamps: npt.NDArray[np.uint64]

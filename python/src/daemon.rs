@@ -177,6 +177,7 @@ fn daemon_snapshot(py: Python<'_>, s: &slamd_protocol::transport::SnapshotSample
         resolves: h.resolves,
         keyframes: h.keyframes,
         edges: h.edges,
+        pending: u64::from(h.pending),
         ids: ids(py, poses.iter().map(|p| p.id).collect()).unbind(),
         poses: rows(py, width, flat)?.unbind(),
         timestamps: ids(py, poses.iter().map(|p| p.timestamp_ns).collect()).unbind(),

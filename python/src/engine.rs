@@ -53,6 +53,9 @@ pub struct Snapshot {
     pub keyframes: u64,
     /// Edges received.
     pub edges: u64,
+    /// Loop closures held out of the estimate until the outlier filter
+    /// decides them.
+    pub pending: u64,
     /// The id of each row of `poses` (keyframes joined to the map).
     pub ids: Py<PyArray1<u64>>,
     /// One row per keyframe: `(x, y, theta)` or `(x, y, z, qx, qy, qz, qw)`.
@@ -92,6 +95,7 @@ fn snapshot<P: EnginePose + PyPose>(py: Python<'_>, e: &Core<P>) -> PyResult<Sna
         resolves: s.resolves as u64,
         keyframes: e.graph().len() as u64,
         edges: e.graph().edges().len() as u64,
+        pending: s.pending as u64,
         ids: ids(py, id).unbind(),
         poses: pose_rows(py, poses.into_iter())?.unbind(),
         timestamps: ids(py, s.timestamps().collect()).unbind(),

@@ -25,6 +25,12 @@ pub enum EdgeKind {
 }
 
 impl EdgeKind {
+    /// Whether the outlier filter may switch an edge of this kind off:
+    /// every kind but odometry and trusted loop closures.
+    pub fn switchable(self) -> bool {
+        !matches!(self, EdgeKind::Odometry | EdgeKind::TrustedLoopClosure)
+    }
+
     /// The usual reading of a dataset file: keyframes with consecutive ids are
     /// odometry, every other pair a loop closure.
     pub fn from_ids(i: u64, j: u64) -> Self {

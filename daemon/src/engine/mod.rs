@@ -57,6 +57,7 @@ mod chi2;
 mod config;
 mod error;
 pub mod gauss_newton;
+mod judge;
 pub mod linear_stages;
 mod marginals;
 mod model;
@@ -84,9 +85,11 @@ use crate::geometry::Pose2;
 use crate::gps::{Geodetic, GpsFix, LocalFrame};
 use crate::graph::KeyframeId;
 use background::Background;
+use judge::Judge;
 use op::Polish;
 use schedule::Schedule;
 use state::State;
+use std::collections::HashMap;
 
 /// The incremental pose-graph solver, planar (`Engine`, the default) or
 /// spatial (`Engine<Pose3>`, made by [`Engine::create`]).
@@ -109,6 +112,14 @@ pub struct Engine<P: EnginePose = Pose2> {
     fixes: Vec<FixInput>,
     /// Each keyframe's timestamp (ns; 0: none), by arrival.
     timestamps: Vec<u64>,
+    /// With the filter on: the loop closures' judge ([`judge`]).
+    judge: Option<Judge<P>>,
+    /// Loop closures awaiting the judge, with the keyframes received
+    /// when each arrived.
+    undecided: HashMap<usize, usize>,
+    /// Keyframes from each decided loop closure's arrival to its first
+    /// decision, in the order decided.
+    decision_lags: Vec<u32>,
 }
 
 impl Engine {
@@ -123,8 +134,18 @@ impl<P: EnginePose> Engine<P> {
     /// thresholds move to `P`'s degrees of freedom
     /// ([`OutlierConfig::for_dof`](crate::outliers::OutlierConfig::for_dof));
     /// a setting `P` has no use for ([`EnginePose::check`]) is turned off
-    /// with a warning.
-    pub fn create(mut config: EngineConfig) -> Self {
+    /// with a warning. With the filter on, loop closures wait for its
+    /// judge ([`judge`]).
+    pub fn create(config: EngineConfig) -> Self {
+        if !config.outliers.enabled {
+            return Self::whole(config);
+        }
+        let judge = Self::whole(judge::judge_config(&config));
+        Self::beside(Self::whole(judge::published_config(&config)), judge)
+    }
+
+    /// An engine that applies its own outlier filter, if on.
+    fn whole(mut config: EngineConfig) -> Self {
         config.outliers = config.outliers.for_dof(P::DOF);
         if let Err(reason) = P::check(&config) {
             tracing::warn!(%reason, "Turned off.");
@@ -144,6 +165,9 @@ impl<P: EnginePose> Engine<P> {
             work_base: FactorWork::default(),
             fixes: Vec::new(),
             timestamps: Vec::new(),
+            judge: None,
+            undecided: HashMap::new(),
+            decision_lags: Vec::new(),
             config,
         }
     }
@@ -183,7 +207,11 @@ impl<P: EnginePose> Engine<P> {
     pub fn add_edge(&mut self, edge: EdgeInput<P>) -> Result<usize, EngineError> {
         self.submit(Op::Edge(edge))?;
         self.schedule.edge_added();
-        Ok(self.state.model.graph.edges().len() - 1)
+        let e = self.state.model.graph.edges().len() - 1;
+        if self.state.model.edges[e].pending {
+            self.undecided.insert(e, self.keyframe_count());
+        }
+        Ok(e)
     }
 
     /// Sets an edge's weight (its information is scaled by `scale`; 0
@@ -209,6 +237,11 @@ impl<P: EnginePose> Engine<P> {
             }
             Err(e) => return Err(e),
         }
+        if let Some(judge) = &mut self.judge {
+            if !matches!(op, Op::Switch { .. }) {
+                judge.forward(&op);
+            }
+        }
         self.background.record(op);
         Ok(())
     }
@@ -216,6 +249,15 @@ impl<P: EnginePose> Engine<P> {
     /// Solves for the new estimate, swaps in a finished re-solve, and
     /// starts one when due. Returns what changed.
     pub fn update(&mut self) -> UpdateReport {
+        let decided = match &mut self.judge {
+            Some(judge) => {
+                let decisions = judge.update();
+                let decided = decisions.len();
+                self.take_decisions(decisions);
+                decided
+            }
+            None => 0,
+        };
         let mut resolved = self.poll_background();
         let mut moved = self.solve();
         if self.state.take_drifted() {
@@ -260,11 +302,15 @@ impl<P: EnginePose> Engine<P> {
             moved,
             chi2: self.state.chi2(),
             resolved,
+            decided,
         }
     }
 
     /// Starts a re-solve now if none is running (call when idle).
     pub fn idle(&mut self) {
+        if let Some(judge) = &mut self.judge {
+            judge.idle();
+        }
         if !self.background.running() && self.schedule.has_new_edges() {
             self.start_job(Polish::Full);
         }
@@ -274,7 +320,11 @@ impl<P: EnginePose> Engine<P> {
     /// re-solve has finished, so the caller can [`Self::update`] at once
     /// to swap it in rather than at its next update.
     pub fn wake_on_resolved(&mut self, wake: impl Fn() + Send + Sync + 'static) {
-        self.background.wake_with(std::sync::Arc::new(wake));
+        let wake: resolve::Waker = std::sync::Arc::new(wake);
+        if let Some(judge) = &mut self.judge {
+            judge.wake_with(wake.clone());
+        }
+        self.background.wake_with(wake);
     }
 
     /// True while a re-solve runs on its thread.
@@ -283,8 +333,12 @@ impl<P: EnginePose> Engine<P> {
     }
 
     /// Re-solves inline over everything (abandoning a running re-solve):
-    /// the polished estimate of the whole graph.
+    /// the polished estimate of the whole graph. With the filter on, it
+    /// first waits for the judge's closing decisions.
     pub fn resolve_now(&mut self) -> UpdateReport {
+        let decisions = self.judge.as_mut().map(|j| j.close()).unwrap_or_default();
+        let decided = decisions.len();
+        self.take_decisions(decisions);
         let moved = self.resolve_inline(Polish::Closing);
         self.version += 1;
         UpdateReport {
@@ -292,6 +346,7 @@ impl<P: EnginePose> Engine<P> {
             moved,
             chi2: self.state.chi2(),
             resolved: true,
+            decided,
         }
     }
 
@@ -308,6 +363,7 @@ impl<P: EnginePose> Engine<P> {
             poses: self.state.estimate(),
             georef: self.state.georef(),
             origin: self.gps_origin(),
+            pending: self.undecided.len(),
         }
     }
 
@@ -333,9 +389,20 @@ impl<P: EnginePose> Engine<P> {
     pub fn stats(&self) -> EngineStats {
         let mut work = self.work_done;
         work += self.state.work() - self.work_base;
+        let drift_resolves = match &self.judge {
+            Some(judge) => judge.stats().drift_resolves,
+            None => self.stats.drift_resolves,
+        };
+        let mut lags = self.decision_lags.clone();
+        lags.sort_unstable();
+        let at = |q: f64| lags.get(((lags.len() as f64 * q) as usize).min(lags.len().saturating_sub(1)));
+        let decision_lag = [at(0.5), at(0.99), lags.last()].map(|l| l.copied().unwrap_or(0));
         EngineStats {
             factor_nnz: self.state.factor_nnz(),
             work,
+            drift_resolves,
+            pending: self.undecided.len(),
+            decision_lag,
             ..self.stats
         }
     }
@@ -478,55 +545,8 @@ impl<P: EnginePose> Engine<P> {
     }
 }
 
-/// Saved maps and GPS.
+/// GPS.
 impl<P: EnginePose> Engine<P> {
-    /// An engine holding `map`: its keyframes, edges with their weights
-    /// and switches, fixes and georeference, the factor built once at the
-    /// saved linearisation point. With `polish` (keyframes or edges that
-    /// the map's estimate does not cover yet), a re-solve's robust polish
-    /// runs first, over everything. The map's GPS origin wins over the
-    /// configured one (its fixes are relative to it).
-    pub fn restore(
-        config: EngineConfig,
-        map: &crate::store::MapFile<P>,
-        polish: bool,
-    ) -> Result<Self, EngineError> {
-        let mut engine = Self::create(config);
-        if let Some(o) = map.origin {
-            if engine.frame.is_some_and(|f| f.origin != o) {
-                tracing::warn!(?o, "The saved map has its own GPS origin; using it.");
-            }
-            engine.frame = Some(LocalFrame::new(o));
-        }
-        if engine.frame.is_none() {
-            // the first fix sets the origin, as in add_gps
-            let first = map.fixes.first().map(|f| f.position);
-            engine.frame = first
-                .and_then(|p| Geodetic::new(p.lat, p.lon, p.height).ok())
-                .map(LocalFrame::new);
-        }
-        let polish = if polish { Polish::Full } else { Polish::None };
-        let state = restore::state_of(map, engine.frame, polish, &engine.config)?;
-        engine.work_base = state.work();
-        engine.schedule.fresh(&state);
-        engine.schedule.polished(&state);
-        engine.state = state;
-        engine.fixes = map.fixes.clone();
-        engine.timestamps = map.keyframes.iter().map(|k| k.timestamp_ns).collect();
-        engine.version = 1;
-        if polish == Polish::Full {
-            engine.stats.resolves += 1;
-        }
-        Ok(engine)
-    }
-
-    /// The map as it stands: keyframes, edges with their weights and
-    /// switches, the estimate, the GPS origin, fixes and georeference.
-    /// Edge origins, acknowledgements and held messages are left empty.
-    pub fn map(&self) -> crate::store::MapFile<P> {
-        restore::map_of(&self.state, self.gps_origin(), &self.fixes, &self.timestamps)
-    }
-
     /// Adds a GPS fix to a known keyframe (the daemon holds fixes that
     /// overtake their keyframe, as it holds edges). The first fix sets the
     /// ENU origin unless the configuration names one. Fixes enter the

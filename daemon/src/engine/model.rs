@@ -37,6 +37,8 @@ pub struct EdgeState {
     pub admitted: bool,
     /// Its terms are in the solvers.
     pub applied: bool,
+    /// A loop closure the judge has not decided yet: held out (switch 0).
+    pub pending: bool,
 }
 
 impl EdgeState {
@@ -46,6 +48,14 @@ impl EdgeState {
         switch: 1.0,
         admitted: false,
         applied: false,
+        pending: false,
+    };
+
+    /// A new loop closure held out until the judge decides it.
+    pub const PENDING: EdgeState = EdgeState {
+        switch: 0.0,
+        pending: true,
+        ..EdgeState::NEW
     };
 
     /// The multiplier of the edge's information: `scale · s²`, or 0 when
@@ -84,6 +94,9 @@ pub struct Model<P: EnginePose = Pose2> {
     pub georef: Option<Georef>,
     /// The weight of every GPS prior (the graph's variance factor).
     pub gps_weight: f64,
+    /// Loop closures wait for a judge's decision ([`EdgeState::PENDING`])
+    /// rather than pass the arrival gate: the publishing engine's model.
+    pub judged: bool,
     /// The pairwise consistency of the loop closures. It depends on the
     /// input alone, so every copy of the model (a background re-solve's)
     /// shares and extends the one graph.
@@ -167,7 +180,17 @@ impl<P: EnginePose> Model<P> {
         stop: &AtomicBool,
     ) -> Vec<P> {
         let filter = &config.outliers;
-        let (edges, ids) = self.compact_edges(compact, |m, e| m.edges[e].scale);
+        // with the filter off the switches stand (a judge's, or none): the
+        // edges weigh what they weigh, and the polish is plain
+        let (edges, ids) = if filter.enabled {
+            self.compact_edges(compact, |m, e| m.edges[e].scale)
+        } else {
+            let (edges, ids) = self.compact_edges(compact, Self::weight);
+            // held out or switched off: no fill for nothing
+            (edges.into_iter().zip(ids))
+                .filter(|(_, e)| self.weight(*e) > 0.0)
+                .unzip()
+        };
         let switchable: Vec<bool> = ids
             .iter()
             .map(|&e| filter.switchable(&self.graph.edges()[e]))
@@ -195,8 +218,10 @@ impl<P: EnginePose> Model<P> {
         let Ok(solution) = robust_polish(input, starts, filter, lm, threads, Some(stop)) else {
             return initial;
         };
-        for (a, &e) in ids.iter().enumerate() {
-            self.edges[e].switch = solution.switches[a];
+        if filter.enabled {
+            for (a, &e) in ids.iter().enumerate() {
+                self.edges[e].switch = solution.switches[a];
+            }
         }
         if matches!(polish, Polish::Full | Polish::FullInline | Polish::Closing) {
             self.edges.iter_mut().for_each(|s| s.admitted = false);
@@ -243,7 +268,8 @@ impl<P: EnginePose> Model<P> {
             } else {
                 1.0
             };
-            if ids.iter().any(|&e| self.edges[e].switch < rescue_below) {
+            let filtered = config.outliers.enabled;
+            if filtered && ids.iter().any(|&e| self.edges[e].switch < rescue_below) {
                 starts.extend(self.linear_start(compact, joined, initial[0], |m, e| m.edges[e].scale));
             }
             // and, closing (or always, `unadmitted_start`), without the

@@ -29,6 +29,15 @@ pub enum Op<P: EnginePose = Pose2> {
         /// Its new scale.
         scale: f64,
     },
+    /// The outlier filter's decision on a loop closure: its switch
+    /// `s ∈ [0, 1]` (the judge's, see [`super::judge`]). It is no longer
+    /// pending.
+    Switch {
+        /// The edge's index.
+        edge: usize,
+        /// Its switch.
+        switch: f64,
+    },
 }
 
 /// How [`rebuild`](super::rebuild::rebuild) moves the

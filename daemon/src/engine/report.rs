@@ -40,6 +40,9 @@ pub struct UpdateReport {
     pub chi2: f64,
     /// True when a finished re-solve was swapped in.
     pub resolved: bool,
+    /// Loop closure switches the outlier filter's judge decided or changed
+    /// that this update took in.
+    pub decided: usize,
 }
 
 /// Counters of the engine's work.
@@ -61,8 +64,15 @@ pub struct EngineStats {
     /// Inline re-solves forced by the nonlinearity check.
     pub nonlinear_resolves: usize,
     /// Inline re-solves forced by a run of agreeing loop closures switched
-    /// off on arrival ([`DriftRun`](crate::outliers::DriftRun)).
+    /// off on arrival ([`DriftRun`](crate::outliers::DriftRun)), the
+    /// judge's as of its last decisions.
     pub drift_resolves: usize,
+    /// Loop closures awaiting the judge's decision now.
+    pub pending: usize,
+    /// Keyframes from a loop closure's arrival to the judge's first
+    /// decision on it: median, 99th percentile and largest, over the loop
+    /// closures decided so far ([`Engine::decision_lags`](super::Engine::decision_lags)).
+    pub decision_lag: [u32; 3],
     /// Entries of the Gauss–Newton factor now.
     pub factor_nnz: usize,
     /// What the updates and solves on this thread have swept of the

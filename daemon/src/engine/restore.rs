@@ -13,11 +13,12 @@
 //! yet (a journal's tail folded in) gets one re-solve's robust polish
 //! first ([`rebuild`]).
 
+use super::judge;
 use super::model::{EdgeState, Model};
 use super::op::Polish;
 use super::rebuild::{factorise, rebuild};
 use super::state::State;
-use super::{EngineConfig, EngineError, EnginePose, FixInput};
+use super::{Engine, EngineConfig, EngineError, EnginePose, FixInput};
 use crate::gps::{Geodetic, GpsFix, LocalFrame};
 use crate::store::{MapEdge, MapFile, MapKeyframe, SavedGeoref};
 use std::collections::VecDeque;
@@ -46,8 +47,7 @@ pub(super) fn state_of<P: EnginePose>(
         model.edges.push(EdgeState {
             scale: e.scale,
             switch: e.switch,
-            admitted: false,
-            applied: false,
+            ..EdgeState::NEW
         });
     }
     join(&mut model, &mut lin, map);
@@ -81,7 +81,7 @@ fn join<P: EnginePose>(model: &mut Model<P>, lin: &mut [P], map: &MapFile<P>) {
     model.joined[0] = true;
     while let Some(m) = queue.pop_front() {
         for &(k, e) in &adjacency[m] {
-            if model.joined[k] || model.edges[e].scale == 0.0 {
+            if model.joined[k] || model.edges[e].weight() == 0.0 {
                 continue;
             }
             model.joined[k] = true;
@@ -176,5 +176,69 @@ pub(super) fn map_of<P: EnginePose>(
         }),
         fixes: fixes.to_vec(),
         ..MapFile::default()
+    }
+}
+
+/// Saved maps.
+impl<P: EnginePose> Engine<P> {
+    /// An engine holding `map`: its keyframes, edges with their weights
+    /// and switches, fixes and georeference, the factor built once at the
+    /// saved linearisation point. With `polish` (keyframes or edges that
+    /// the map's estimate does not cover yet), a re-solve's robust polish
+    /// runs first, over everything. The map's GPS origin wins over the
+    /// configured one (its fixes are relative to it).
+    pub fn restore(
+        config: EngineConfig,
+        map: &crate::store::MapFile<P>,
+        polish: bool,
+    ) -> Result<Self, EngineError> {
+        if !config.outliers.enabled {
+            return Self::restore_whole(config, map, polish);
+        }
+        let judge = Self::restore_whole(judge::judge_config(&config), map, polish)?;
+        let engine = Self::restore_whole(judge::published_config(&config), map, polish)?;
+        Ok(Self::beside(engine, judge))
+    }
+
+    /// [`Self::restore`] for an engine that applies its own filter, if on.
+    fn restore_whole(
+        config: EngineConfig,
+        map: &crate::store::MapFile<P>,
+        polish: bool,
+    ) -> Result<Self, EngineError> {
+        let mut engine = Self::whole(config);
+        if let Some(o) = map.origin {
+            if engine.frame.is_some_and(|f| f.origin != o) {
+                tracing::warn!(?o, "The saved map has its own GPS origin; using it.");
+            }
+            engine.frame = Some(LocalFrame::new(o));
+        }
+        if engine.frame.is_none() {
+            // the first fix sets the origin, as in add_gps
+            let first = map.fixes.first().map(|f| f.position);
+            engine.frame = first
+                .and_then(|p| Geodetic::new(p.lat, p.lon, p.height).ok())
+                .map(LocalFrame::new);
+        }
+        let polish = if polish { Polish::Full } else { Polish::None };
+        let state = state_of(map, engine.frame, polish, &engine.config)?;
+        engine.work_base = state.work();
+        engine.schedule.fresh(&state);
+        engine.schedule.polished(&state);
+        engine.state = state;
+        engine.fixes = map.fixes.clone();
+        engine.timestamps = map.keyframes.iter().map(|k| k.timestamp_ns).collect();
+        engine.version = 1;
+        if polish == Polish::Full {
+            engine.stats.resolves += 1;
+        }
+        Ok(engine)
+    }
+
+    /// The map as it stands: keyframes, edges with their weights and
+    /// switches, the estimate, the GPS origin, fixes and georeference.
+    /// Edge origins, acknowledgements and held messages are left empty.
+    pub fn map(&self) -> crate::store::MapFile<P> {
+        map_of(&self.state, self.gps_origin(), &self.fixes, &self.timestamps)
     }
 }

@@ -22,6 +22,9 @@ pub struct Snapshot<'a, P: RigidMotion = Pose2> {
     pub georef: Option<Georef>,
     /// The geodetic origin of the ENU frame, once known.
     pub origin: Option<Geodetic>,
+    /// Loop closures held out of the estimate until the outlier filter's
+    /// judge decides them.
+    pub pending: usize,
 }
 
 impl<'a, P: RigidMotion> Snapshot<'a, P> {

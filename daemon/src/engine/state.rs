@@ -156,7 +156,9 @@ impl<P: EnginePose> State<P> {
                     input.information,
                     input.kind,
                 )?;
-                self.model.edges.push(EdgeState::NEW);
+                let held = self.model.judged && input.kind.switchable();
+                let state = if held { EdgeState::PENDING } else { EdgeState::NEW };
+                self.model.edges.push(state);
                 self.chi2.push_edge();
                 self.model.pending.push(e);
                 Ok(())
@@ -170,6 +172,7 @@ impl<P: EnginePose> State<P> {
                 Ok(())
             }
             Op::Weight { edge, scale } => self.reweight(*edge, *scale),
+            Op::Switch { edge, switch } => self.set_switch(*edge, *switch),
         }
     }
 
@@ -223,16 +226,66 @@ impl<P: EnginePose> State<P> {
 
     fn reweight(&mut self, e: usize, scale: f64) -> Result<(), EngineError> {
         self.check_weight(e, scale)?;
+        self.change(e, |s| s.scale = scale)
+    }
+
+    /// Sets loop closure `e`'s switch as the judge decided.
+    fn set_switch(&mut self, e: usize, switch: f64) -> Result<(), EngineError> {
+        self.check_switch(e, switch)?;
+        self.change(e, |s| {
+            s.switch = switch;
+            s.pending = false;
+        })
+    }
+
+    fn check_switch(&self, e: usize, switch: f64) -> Result<(), EngineError> {
+        let edge = self
+            .model
+            .graph
+            .edges()
+            .get(e)
+            .ok_or(EngineError::UnknownEdge(e))?;
+        if !edge.kind.switchable() || !(0.0..=1.0).contains(&switch) {
+            return Err(EngineError::InvalidWeight(switch));
+        }
+        Ok(())
+    }
+
+    /// Sets many switches at once, leaving the factor behind for the
+    /// caller to rebuild: the terms of edges in the solvers are not
+    /// updated (one refactorisation costs less than many updates into an
+    /// ordering that did not foresee them). Invalid decisions are skipped.
+    pub fn set_switches_for_rebuild(&mut self, decisions: &[(usize, f64)]) -> Result<(), EngineError> {
+        let mut result = Ok(());
+        for &(e, switch) in decisions {
+            if let Err(err) = self.check_switch(e, switch) {
+                result = Err(err);
+                continue;
+            }
+            let state = &mut self.model.edges[e];
+            if state.applied {
+                state.switch = switch;
+                state.pending = false;
+            } else if let Err(err) = self.set_switch(e, switch) {
+                result = Err(err);
+            }
+        }
+        result
+    }
+
+    /// Applies `set` to edge `e`'s state and the change of its weight to
+    /// the solvers; an edge that waited while it weighed nothing connects.
+    fn change(&mut self, e: usize, set: impl FnOnce(&mut EdgeState)) -> Result<(), EngineError> {
         let before = self.model.weight(e);
-        self.model.edges[e].scale = scale;
-        let delta = self.model.weight(e) - before;
+        set(&mut self.model.edges[e]);
+        let after = self.model.weight(e);
         if self.model.edges[e].applied {
-            if delta != 0.0 {
-                self.contribute(e, delta)?;
+            if after != before {
+                self.contribute(e, after - before)?;
                 self.refresh_edge(e);
             }
             Ok(())
-        } else if scale > 0.0 && !self.model.pending.contains(&e) {
+        } else if after > 0.0 && !self.model.pending.contains(&e) {
             self.connect(e)
         } else {
             Ok(())
@@ -281,8 +334,9 @@ impl<P: EnginePose> State<P> {
                     self.model.wait_for(j, e);
                     continue;
                 }
-                (true, false) | (false, true) if self.model.edges[e].scale == 0.0 => {
-                    // a switched-off edge constrains nothing: it cannot join a keyframe
+                (true, false) | (false, true) if self.model.weight(e) == 0.0 => {
+                    // an edge switched off, removed or pending constrains
+                    // nothing: it cannot join a keyframe
                     let k = if self.model.joined[i] { j } else { i };
                     self.model.wait_for(k, e);
                     continue;

@@ -435,7 +435,7 @@ impl<P: EnginePose> EngineLoop<P> {
             origin: snap.origin.map_or([0.0; 3], |o| [o.lat, o.lon, o.height]),
             acks: self.durable,
             has_covariance: u32::from(covariance.is_some()),
-            reserved: 0,
+            pending: snap.pending as u32,
             covariance_keyframe: covariance.map_or(0, |c| c.0),
             covariance: covariance.map_or([0.0; INFORMATION_UPPER], |c| c.1),
         };
@@ -463,7 +463,7 @@ impl<P: EnginePose> EngineLoop<P> {
             publish_us = (t0.elapsed() - solved).as_micros() as u64,
             "Snapshot published."
         );
-        if report.resolved || self.new_loop_closure {
+        if report.resolved || report.decided > 0 || self.new_loop_closure {
             self.publish_switches(report.version);
         }
         self.dirty = false;
@@ -519,10 +519,13 @@ impl<P: EnginePose> EngineLoop<P> {
         let loops: Vec<usize> = (0..edges.len())
             .filter(|&e| edges[e].kind != EdgeKind::Odometry)
             .collect();
-        let rejected = loops.iter().filter(|&&e| switches[e] < REJECTED_BELOW).count();
+        let pending = loops.iter().filter(|&&e| self.engine.is_pending(e)).count();
+        let rejected = (loops.iter())
+            .filter(|&&e| switches[e] < REJECTED_BELOW && !self.engine.is_pending(e))
+            .count();
         let header = SwitchesHeader {
             protocol: PROTOCOL_VERSION,
-            reserved: 0,
+            pending: pending as u32,
             version,
             count: 0,
             rejected: rejected as u64,
@@ -534,7 +537,14 @@ impl<P: EnginePose> EngineLoop<P> {
                 frontend: 0,
                 sequence: 0,
             });
-            wire::switch_out(graph.id_of(edge.from), graph.id_of(edge.to), o, switches[e])
+            let pending = self.engine.is_pending(e);
+            wire::switch_out(
+                graph.id_of(edge.from),
+                graph.id_of(edge.to),
+                o,
+                switches[e],
+                pending,
+            )
         });
         if let Err(e) = self.outlet.publish_switches(header, loops.len(), items) {
             tracing::error!(error = %e, "Cannot publish the switches.");

@@ -26,7 +26,7 @@ pub use drift::DriftRun;
 pub use robust::{robust_polish, RobustEdges, RobustSolution, DORMANT_BELOW};
 pub use starts::{ABANDON_RATIO, LATE_RATIO, LOOK_ITERATIONS, PROBE_ITERATIONS, PRUNE_RATIO};
 
-use crate::graph::{Edge, EdgeKind};
+use crate::graph::Edge;
 use crate::robust::kernel::dcs;
 use crate::robust::Kernel;
 
@@ -162,7 +162,7 @@ impl OutlierConfig {
     /// Whether `edge` gets a switch: every edge but odometry and trusted
     /// loop closures, when enabled.
     pub fn switchable<P: crate::graph::RigidMotion>(&self, edge: &Edge<P>) -> bool {
-        self.enabled && !matches!(edge.kind, EdgeKind::Odometry | EdgeKind::TrustedLoopClosure)
+        self.enabled && edge.kind.switchable()
     }
 }
 

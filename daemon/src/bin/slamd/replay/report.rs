@@ -96,6 +96,8 @@ impl Report {
                 "recoveries": s.recoveries,
                 "walked_entries": s.work.walked,
                 "solved_entries": s.work.solved,
+                "pending": s.pending,
+                "decision_lag_keyframes": s.decision_lag,
             })),
             "chi2": self.chi2,
             "ate": self.ate,

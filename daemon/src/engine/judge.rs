@@ -1,0 +1,371 @@
+//! [`Judge`]: the outlier filter's decisions, made off the snapshot path
+//! and the same on every run.
+//!
+//! With the filter on, the publishing engine holds every new loop closure
+//! *pending* (switch 0, out of its factor) until the judge has decided it.
+//! The judge is a second [`Engine`] with the filter on and all its work
+//! inline (`background = false`), fed the same ops in the same order and
+//! updated at the same points, on a thread of its own. Its switches are
+//! therefore a function of the input, its order and the configuration,
+//! never of when a background re-solve landed or how loaded the machine
+//! is. After each update it sends the switches that changed, and the
+//! publishing engine applies them ([`Op::Switch`]) at its next update. A
+//! judge that falls behind delays decisions, never a snapshot: a robust
+//! re-solve it runs inline stalls only the judge.
+//!
+//! The contract between the two: edge `e` is the same edge on both sides
+//! (an op the publishing engine refused is not forwarded), the publishing
+//! engine never forwards a switch, and the judge sends no switch of a loop
+//! closure it has not connected yet.
+//!
+//! The judge updates where the input says: before each new keyframe
+//! (the previous one's edges are in by then), when the input pauses
+//! ([`Engine::idle`]) and at the end of a stream ([`Engine::resolve_now`]).
+//! At both it also takes the closing re-solve, once per pause, and at the
+//! end of a stream the publishing engine waits for it. On its
+//! thread a decision therefore comes one keyframe after its loop closure
+//! at the earliest. Inline, the judge also updates at the start of each of
+//! the publishing engine's updates, whose caller then decides the points:
+//! a stream of keyframes each followed by its edges and an update is
+//! judged alike either way.
+
+use super::op::{Op, Polish};
+use super::pose::EnginePose;
+use super::resolve::Waker;
+use super::{Engine, EngineConfig, EngineStats};
+use crossbeam::channel::{self, Receiver, Sender};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
+
+/// Switches decided: `(edge, switch)`, later ones overriding earlier ones.
+pub(super) type Decisions = Vec<(usize, f64)>;
+
+/// What the publishing engine asks of the judge, in input order.
+enum Ask<P: EnginePose> {
+    /// An op the publishing engine applied.
+    Op(Op<P>),
+    /// Update if anything arrived since the last update.
+    Update,
+    /// The input paused: update and take the closing re-solve, if
+    /// anything arrived since the last one.
+    Idle,
+    /// The end of a stream: update, take the closing re-solve, answer.
+    Close(Sender<Decisions>),
+}
+
+/// The judge's engine and the switches it has sent.
+pub(super) struct Bench<P: EnginePose> {
+    engine: Engine<P>,
+    /// Ops arrived since its last update.
+    fresh: bool,
+    /// Ops arrived since its last closing re-solve.
+    unsettled: bool,
+    /// The switch last sent for each edge (`NaN`: none yet).
+    sent: Vec<f64>,
+    /// The switchable edges, by index.
+    switchable: Vec<usize>,
+}
+
+impl<P: EnginePose> Bench<P> {
+    /// The judge over `engine`, which has sent the switches it holds (a
+    /// restored engine and its publishing twin hold the same).
+    fn new(engine: Engine<P>) -> Self {
+        let mut bench = Self {
+            engine,
+            fresh: false,
+            unsettled: false,
+            sent: Vec::new(),
+            switchable: Vec::new(),
+        };
+        bench.decisions();
+        bench
+    }
+
+    /// Takes `ask`; returns the decisions of an update it made.
+    fn ask(&mut self, ask: Ask<P>) -> Option<Decisions> {
+        match ask {
+            Ask::Op(op) => {
+                let update = matches!(op, Op::Keyframe { .. }) && self.fresh;
+                let decided = update.then(|| self.update());
+                if let Err(e) = self.engine.submit(op) {
+                    // the publishing engine applied it: only numbers differ
+                    tracing::error!(error = %e, "The judge could not apply an op.");
+                }
+                (self.fresh, self.unsettled) = (true, true);
+                decided
+            }
+            Ask::Update => self.fresh.then(|| self.update()),
+            Ask::Idle => self.unsettled.then(|| self.close()),
+            Ask::Close(reply) => {
+                let decided = if self.unsettled { self.close() } else { Vec::new() };
+                let _ = reply.send(decided);
+                None
+            }
+        }
+    }
+
+    fn update(&mut self) -> Decisions {
+        self.engine.update();
+        self.fresh = false;
+        self.decisions()
+    }
+
+    /// Updates and takes the closing re-solve.
+    fn close(&mut self) -> Decisions {
+        self.engine.update();
+        self.engine.resolve_now();
+        (self.fresh, self.unsettled) = (false, false);
+        let decided = self.decisions();
+        tracing::debug!(decided = decided.len(), "The judge closed.");
+        decided
+    }
+
+    /// The switches of connected loop closures that changed since the last
+    /// call (every one at the first).
+    fn decisions(&mut self) -> Decisions {
+        let edges = self.engine.graph().edges();
+        let new = edges.iter().enumerate().skip(self.sent.len());
+        self.switchable
+            .extend(new.filter(|(_, edge)| edge.kind.switchable()).map(|(e, _)| e));
+        self.sent.resize(edges.len(), f64::NAN);
+        let states = &self.engine.state.model.edges;
+        let mut changed = Vec::new();
+        for &e in &self.switchable {
+            let s = states[e].switch;
+            // NaN equals nothing: a first decision is always sent
+            if states[e].applied && s != self.sent[e] {
+                self.sent[e] = s;
+                changed.push((e, s));
+            }
+        }
+        changed
+    }
+}
+
+/// The outlier filter's judge: inline (the publishing engine's
+/// `background` off) or on a thread of its own.
+pub(super) enum Judge<P: EnginePose> {
+    /// Judging within the publishing engine's calls, with the decisions
+    /// not yet taken.
+    Inline(Box<Bench<P>>, Decisions),
+    /// On its thread.
+    Thread(Worker<P>),
+}
+
+/// A judge on its thread.
+pub(super) struct Worker<P: EnginePose> {
+    asks: Sender<Ask<P>>,
+    decisions: Receiver<(Decisions, EngineStats)>,
+    /// The judge's counters with the last decisions taken.
+    stats: EngineStats,
+    wake: Arc<Mutex<Option<Waker>>>,
+    stop: Arc<AtomicBool>,
+}
+
+impl<P: EnginePose> Drop for Worker<P> {
+    /// Stops the judge at its next ask (the thread is detached).
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+    }
+}
+
+impl<P: EnginePose> Judge<P> {
+    /// A judge over `engine` (built by [`judge_config`]; a restored one
+    /// holds the saved map), on its own thread when `threaded`. Its first
+    /// decisions cover every loop closure `engine` has connected.
+    pub fn new(engine: Engine<P>, threaded: bool) -> Self {
+        debug_assert!(!engine.config.background && engine.config.outliers.enabled);
+        let mut bench = Bench::new(engine);
+        if !threaded {
+            return Judge::Inline(Box::new(bench), Vec::new());
+        }
+        let stats = bench.engine.stats();
+        let (asks, asked) = channel::unbounded::<Ask<P>>();
+        let (decided, decisions) = channel::unbounded();
+        let stop = Arc::new(AtomicBool::new(false));
+        let wake: Arc<Mutex<Option<Waker>>> = Arc::default();
+        let (stopped, waker) = (Arc::clone(&stop), Arc::clone(&wake));
+        std::thread::Builder::new()
+            .name("slamd-judge".into())
+            .spawn(move || {
+                // the daemon's engine thread may hold a reserved core
+                crate::affinity::run_in_background();
+                for ask in asked {
+                    if stopped.load(Ordering::Relaxed) {
+                        return;
+                    }
+                    let Some(d) = bench.ask(ask) else { continue };
+                    if d.is_empty() {
+                        continue;
+                    }
+                    if decided.send((d, bench.engine.stats())).is_err() {
+                        return;
+                    }
+                    let wake = waker.lock().map(|w| w.clone()).ok().flatten();
+                    if let Some(wake) = wake {
+                        wake();
+                    }
+                }
+            })
+            .expect("spawn the judge's thread");
+        Judge::Thread(Worker {
+            asks,
+            decisions,
+            stats,
+            wake,
+            stop,
+        })
+    }
+
+    /// Forwards an op the publishing engine applied.
+    pub fn forward(&mut self, op: &Op<P>) {
+        debug_assert!(!matches!(op, Op::Switch { .. }));
+        self.ask(Ask::Op(op.clone()));
+    }
+
+    /// The input paused.
+    pub fn idle(&mut self) {
+        self.ask(Ask::Idle);
+    }
+
+    fn ask(&mut self, ask: Ask<P>) {
+        match self {
+            Judge::Inline(bench, outbox) => outbox.extend(bench.ask(ask).unwrap_or_default()),
+            Judge::Thread(w) => {
+                let _ = w.asks.send(ask);
+            }
+        }
+    }
+
+    /// The publishing engine updates: what the judge has decided since
+    /// the last call (inline, after updating at this point).
+    pub fn update(&mut self) -> Decisions {
+        if let Judge::Inline(..) = self {
+            self.ask(Ask::Update);
+        }
+        self.decisions()
+    }
+
+    /// What the judge has decided since the last call.
+    fn decisions(&mut self) -> Decisions {
+        match self {
+            Judge::Inline(_, outbox) => std::mem::take(outbox),
+            Judge::Thread(w) => {
+                let mut all = Vec::new();
+                for (d, stats) in w.decisions.try_iter() {
+                    all.extend(d);
+                    w.stats = stats;
+                }
+                all
+            }
+        }
+    }
+
+    /// The judge's counters as of the decisions taken last.
+    pub fn stats(&self) -> EngineStats {
+        match self {
+            Judge::Inline(bench, _) => bench.engine.stats(),
+            Judge::Thread(w) => w.stats,
+        }
+    }
+
+    /// The end of a stream: waits until the judge has caught up and taken
+    /// its closing re-solve, and returns every decision not yet taken.
+    pub fn close(&mut self) -> Decisions {
+        let (reply, answer) = channel::bounded(1);
+        self.ask(Ask::Close(reply));
+        // on the thread, the decisions sent before the answer are queued
+        // before it
+        let last = answer.recv().unwrap_or_default();
+        let mut all = self.decisions();
+        all.extend(last);
+        all
+    }
+
+    /// Calls `wake` on the judge's thread whenever it has sent decisions.
+    pub fn wake_with(&mut self, wake: Waker) {
+        if let Judge::Thread(w) = self {
+            if let Ok(mut slot) = w.wake.lock() {
+                *slot = Some(wake);
+            }
+        }
+    }
+}
+
+/// The publishing engine's side of the judge.
+impl<P: EnginePose> Engine<P> {
+    /// `engine` publishing with `judge` deciding its loop closures.
+    pub(super) fn beside(mut engine: Self, judge: Self) -> Self {
+        let threaded = engine.config.background;
+        engine.state.model.judged = true;
+        engine.judge = Some(Judge::new(judge, threaded));
+        engine
+    }
+
+    /// Takes the judge's decisions: each loop closure's switch as it
+    /// decided. Many at once are set in the model and the factor is
+    /// rebuilt.
+    pub(super) fn take_decisions(&mut self, decisions: Decisions) {
+        let keyframes = self.keyframe_count();
+        for _ in &decisions {
+            // a re-solve is due for them as for new edges
+            self.schedule.edge_added();
+        }
+        for &(edge, _) in &decisions {
+            if let Some(arrived) = self.undecided.remove(&edge) {
+                self.decision_lags.push((keyframes - arrived) as u32);
+            }
+        }
+        if decisions.len() <= BULK_DECISIONS {
+            for (edge, switch) in decisions {
+                if let Err(e) = self.submit(Op::Switch { edge, switch }) {
+                    tracing::error!(error = %e, edge, "Cannot take the judge's decision.");
+                }
+            }
+            return;
+        }
+        // the edges' terms join the solvers with the rebuild
+        self.solve();
+        if let Err(e) = self.state.set_switches_for_rebuild(&decisions) {
+            tracing::error!(error = %e, "Cannot take a decision of the judge.");
+        }
+        for (edge, switch) in decisions {
+            self.background.record(Op::Switch { edge, switch });
+        }
+        self.rebuild_inline(Polish::None);
+    }
+
+    /// Whether loop closure `edge` awaits the judge's decision (held out
+    /// of the estimate meanwhile).
+    pub fn is_pending(&self, edge: usize) -> bool {
+        self.undecided.contains_key(&edge)
+    }
+
+    /// Keyframes from each decided loop closure's arrival to the judge's
+    /// first decision on it, in the order decided (empty with the filter
+    /// off).
+    pub fn decision_lags(&self) -> &[u32] {
+        &self.decision_lags
+    }
+}
+
+/// More of the judge's decisions than this at once are taken by
+/// refactorising rather than by one update each.
+const BULK_DECISIONS: usize = 32;
+
+/// The configuration of the judge of an engine configured `config`: the
+/// same (the filter on), with everything inline.
+pub(super) fn judge_config(config: &EngineConfig) -> EngineConfig {
+    EngineConfig {
+        background: false,
+        ..config.clone()
+    }
+}
+
+/// The configuration of the publishing engine beside a judge: the same,
+/// with the filter's work left to the judge.
+pub(super) fn published_config(config: &EngineConfig) -> EngineConfig {
+    let mut published = config.clone();
+    published.outliers.enabled = false;
+    published
+}

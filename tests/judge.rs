@@ -1,0 +1,157 @@
+//! The outlier filter decides off the snapshot path and the same on every
+//! run: a loop closure waits, out of the estimate, until the filter's
+//! judge has decided it, and the judge's decisions depend on the input
+//! alone, not on how far behind its thread runs.
+
+use slamd::engine::{EdgeInput, Engine, EngineConfig};
+use slamd::geometry::Pose2;
+use slamd::graph::{Edge, EdgeKind, Information, PoseGraph};
+use slamd::outliers::REJECTED_BELOW;
+use slamd::synthetic::{generate, WorldParams};
+use std::collections::BTreeSet;
+use std::time::{Duration, Instant};
+
+/// A 600-keyframe synthetic world with 80 random wrong loop closures
+/// (seeded), and the index of the first wrong one.
+fn spoiled_world() -> (PoseGraph, usize) {
+    let world = generate(&WorldParams {
+        poses: 600,
+        seed: 5,
+        ..WorldParams::default()
+    });
+    let mut edges = world.graph.edges().to_vec();
+    let mut rng = 977u64;
+    let mut next = |m: u64| {
+        rng = rng
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (rng >> 33) % m
+    };
+    let first = edges.len();
+    while edges.len() < first + 80 {
+        let (a, b) = (next(600) as usize, next(600) as usize);
+        if a.abs_diff(b) < 2 {
+            continue;
+        }
+        let m = Pose2::new(next(100) as f64 / 50.0, next(100) as f64 / 50.0, 0.3);
+        edges.push(Edge {
+            from: a.min(b),
+            to: a.max(b),
+            measurement: m,
+            information: Information::from_upper([42.7, 0.0, 0.0, 42.7, 0.0, 42.7]).unwrap(),
+            kind: EdgeKind::LoopClosure,
+        });
+    }
+    (
+        PoseGraph::from_parts(world.graph.keyframes().to_vec(), edges).unwrap(),
+        first,
+    )
+}
+
+/// Replays `g` keyframe by keyframe into an engine configured `config`,
+/// pausing `pause(k)` after keyframe `k`'s update, then ends the stream.
+/// Returns the final switches by file edge and the final χ².
+fn replay(g: &PoseGraph, config: EngineConfig, mut pause: impl FnMut(usize) -> Duration) -> (Vec<f64>, f64) {
+    let mut engine = Engine::new(config);
+    let mut sent = Vec::new();
+    for (k, group) in g.by_newer().iter().enumerate() {
+        engine.add_keyframe(g.id_of(k), None).unwrap();
+        for &e in group {
+            engine.add_edge(g.edge_input(e)).unwrap();
+            sent.push(e);
+        }
+        engine.update();
+        std::thread::sleep(pause(k));
+    }
+    let chi2 = engine.resolve_now().chi2;
+    let switches = engine.switches();
+    let mut by_file = vec![1.0; g.edges().len()];
+    for (n, &e) in sent.iter().enumerate() {
+        by_file[e] = switches[n];
+    }
+    (by_file, chi2)
+}
+
+#[test]
+fn the_filter_decides_alike_however_late_its_judge_runs() {
+    let (g, first) = spoiled_world();
+    let inline = EngineConfig {
+        background: false,
+        ..EngineConfig::default()
+    };
+    let (decided, chi2) = replay(&g, inline, |_| Duration::ZERO);
+    let off: BTreeSet<usize> = (0..decided.len())
+        .filter(|&e| decided[e] < REJECTED_BELOW)
+        .collect();
+    let wrong: BTreeSet<usize> = (first..g.edges().len()).collect();
+    let caught = off.intersection(&wrong).count();
+    assert!(caught >= 76, "{caught} of 80 wrong loop closures caught");
+    assert!(off.len() <= caught + 2, "{} true ones off", off.len() - caught);
+    // on its thread, with the stream paused at random (seeded per run) so
+    // that the judge falls behind by different amounts: the same switches,
+    // to the bit, and the same map
+    for seed in [1u64, 2] {
+        let mut rng = seed;
+        let pause = |_| {
+            rng = rng.wrapping_mul(6364136223846793005).wrapping_add(seed);
+            let r = rng >> 60;
+            Duration::from_micros(if r < 4 { 2000 * r } else { 0 })
+        };
+        let (threaded, threaded_chi2) = replay(&g, EngineConfig::default(), pause);
+        let differ: Vec<usize> = (0..decided.len())
+            .filter(|&e| decided[e].to_bits() != threaded[e].to_bits())
+            .collect();
+        assert!(differ.is_empty(), "seed {seed}: switches differ at {differ:?}");
+        assert!(
+            (threaded_chi2 - chi2).abs() <= 1e-6 * chi2,
+            "seed {seed}: χ² {threaded_chi2} against {chi2}"
+        );
+    }
+}
+
+#[test]
+fn a_loop_closure_waits_out_of_the_estimate_until_it_is_decided() {
+    let mut engine = Engine::new(EngineConfig::default());
+    let step = Pose2::new(1.0, 0.0, 0.0);
+    let info = Information::identity().scaled(100.0);
+    for k in 0..20u64 {
+        engine.add_keyframe(k, None).unwrap();
+        if k > 0 {
+            engine
+                .add_edge(EdgeInput::new(k - 1, k, step, info, EdgeKind::Odometry))
+                .unwrap();
+        }
+        engine.update();
+    }
+    let straight: Vec<Pose2> = engine.snapshot().poses().map(|(_, p)| p).collect();
+    // 30 m off a straight corridor: wrong
+    let z = Pose2::new(10.0, 30.0, 1.0);
+    let wrong = engine
+        .add_edge(EdgeInput::new(5, 15, z, info, EdgeKind::LoopClosure))
+        .unwrap();
+    let report = engine.update();
+    // the judge updates before the next keyframe: until then it is pending
+    assert!(engine.is_pending(wrong));
+    assert_eq!((engine.snapshot().pending, engine.switches()[wrong]), (1, 0.0));
+    assert_eq!(report.decided, 0);
+    let unmoved: Vec<Pose2> = engine.snapshot().poses().map(|(_, p)| p).collect();
+    assert_eq!(unmoved, straight, "a pending loop closure moved the map");
+    engine.add_keyframe(20, None).unwrap();
+    engine
+        .add_edge(EdgeInput::new(19, 20, step, info, EdgeKind::Odometry))
+        .unwrap();
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while engine.is_pending(wrong) {
+        assert!(Instant::now() < deadline, "never decided");
+        std::thread::sleep(Duration::from_millis(5));
+        engine.update();
+    }
+    assert!(engine.switches()[wrong] < REJECTED_BELOW);
+    assert_eq!(engine.snapshot().pending, 0);
+    assert_eq!(engine.decision_lags(), &[1]);
+    // a trusted one is never held
+    let trusted = engine
+        .add_edge(EdgeInput::new(5, 15, z, info, EdgeKind::TrustedLoopClosure))
+        .unwrap();
+    assert!(!engine.is_pending(trusted));
+}
