@@ -18,7 +18,12 @@ its defaults. Per run:
 - chi2 over the true edges (the outlier-free file scored by `slamd eval`)
   relative to the outlier-free optimum;
 - total replay time, the outlier-free replay's in the same run and their
-  ratio, and p99 and max latency per keyframe.
+  ratio, and p99 and max latency per keyframe;
+- keyframes from a loop closure's arrival to the filter's decision on it
+  (median / 99th percentile / largest), where slamd reports it. A replay
+  streams as fast as the publishing engine takes keyframes (unless
+  `--rate` paces it), so these measure how far the filter's judge runs
+  behind it.
 
 With --peers, GTSAM runs on the same spoiled files from the odometry
 guess, each under --peer-timeout seconds, and is scored the same way:
@@ -135,14 +140,18 @@ def main():
     ap.add_argument("--counts", nargs="+", type=int, default=[100, 1000, 4000])
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--extra", nargs="*", default=[], help="more slamd replay flags, e.g. --kernel sc:1")
+    ap.add_argument("--rate", type=float, help="keyframes per second (`slamd replay --rate`): the filter's "
+                    "decisions at a robot's pace rather than as fast as the engine takes keyframes")
     ap.add_argument("--peers", action="store_true", help="GTSAM's GNC and DCS in its LM on the same files")
     ap.add_argument("--peer-timeout", type=float, default=600)
     args = ap.parse_args()
+    if args.rate:
+        args.extra += ["--rate", str(args.rate)]
     tmp = tempfile.mkdtemp(prefix="slamd-outliers-")
     print(f"slamd replay --embedded {' '.join(args.extra)} (filter defaults); seed {args.seed}")
-    print("| dataset | outliers | precision | recall | ATE (m) | ATE clean (m) | χ² true / optimum | total (s) | clean (s) | total / clean | p99 (ms) | max (ms) |"
+    print("| dataset | outliers | precision | recall | ATE (m) | ATE clean (m) | χ² true / optimum | total (s) | clean (s) | total / clean | p99 (ms) | max (ms) | decided after (keyframes) |"
           + (" GNC P / R | GNC ATE (m) | GNC χ² true / optimum | GNC (s) | LM+DCS P / R | LM+DCS ATE (m) | LM+DCS χ² true / optimum | LM+DCS (s) |" if args.peers else ""))
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|" + ("---|" * 8 if args.peers else ""))
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|" + ("---|" * 8 if args.peers else ""))
     for name in args.datasets:
         file, gt = DATASETS[name]
         clean = os.path.join(DATA, file)
@@ -167,7 +176,8 @@ def main():
                 ate0 = f"{base['ate']:.4f}" if base.get("ate") is not None else "–"
                 row = (f"| {name} | {count} {kind} | {precision:.3f} | {recall:.3f} | {ate} | {ate0} | "
                        f"{s['chi2'] / optimum:.3f} | {r['total_s']:.2f} | {base['total_s']:.2f} | "
-                       f"{r['total_s'] / base['total_s']:.2f} | {r['p99_us'] / 1e3:.1f} | {r['max_us'] / 1e3:.0f} |")
+                       f"{r['total_s'] / base['total_s']:.2f} | {r['p99_us'] / 1e3:.1f} | {r['max_us'] / 1e3:.0f} | "
+                       f"{' / '.join(map(str, (r.get('engine') or {}).get('decision_lag_keyframes') or ['–']))} |")
                 for method in ("gnc", "dcs") if args.peers else ():
                     g = peer(spoiled, method, args.peer_timeout)
                     if g is None:

@@ -155,7 +155,7 @@ pub fn catch_up<P: EnginePose>(
             }
         }
     }
-    if let Err(e) = state.join_pending() {
+    if let Err(e) = state.join_new() {
         tracing::warn!(error = %e, "Re-solve cannot connect the replayed edges; discarded.");
         return None;
     }

@@ -1,4 +1,4 @@
-//! [`Judge`]: the outlier filter's decisions, made off the snapshot path
+//! The judge: the outlier filter's decisions, made off the snapshot path
 //! and the same on every run.
 //!
 //! With the filter on, the publishing engine holds every new loop closure
@@ -49,8 +49,9 @@ enum Ask<P: EnginePose> {
     /// The input paused: update and take the closing re-solve, if
     /// anything arrived since the last one.
     Idle,
-    /// The end of a stream: update, take the closing re-solve, answer.
-    Close(Sender<Decisions>),
+    /// The end of a stream: update, take the closing re-solve, answer with
+    /// the decisions and the judge's map.
+    Close(Sender<(Decisions, Vec<P>)>),
 }
 
 /// The judge's engine and the switches it has sent.
@@ -98,7 +99,7 @@ impl<P: EnginePose> Bench<P> {
             Ask::Idle => self.unsettled.then(|| self.close()),
             Ask::Close(reply) => {
                 let decided = if self.unsettled { self.close() } else { Vec::new() };
-                let _ = reply.send(decided);
+                let _ = reply.send((decided, self.engine.state.estimate().to_vec()));
                 None
             }
         }
@@ -270,16 +271,17 @@ impl<P: EnginePose> Judge<P> {
     }
 
     /// The end of a stream: waits until the judge has caught up and taken
-    /// its closing re-solve, and returns every decision not yet taken.
-    pub fn close(&mut self) -> Decisions {
+    /// its closing re-solve; returns every decision not yet taken and the
+    /// judge's map (indexed like the keyframes; empty if the judge is gone).
+    pub fn close(&mut self) -> (Decisions, Vec<P>) {
         let (reply, answer) = channel::bounded(1);
         self.ask(Ask::Close(reply));
         // on the thread, the decisions sent before the answer are queued
         // before it
-        let last = answer.recv().unwrap_or_default();
+        let (last, map) = answer.recv().unwrap_or_default();
         let mut all = self.decisions();
         all.extend(last);
-        all
+        (all, map)
     }
 
     /// Calls `wake` on the judge's thread whenever it has sent decisions.

@@ -57,7 +57,7 @@ mod chi2;
 mod config;
 mod error;
 pub mod gauss_newton;
-mod judge;
+pub mod judge;
 pub mod linear_stages;
 mod marginals;
 mod model;
@@ -172,7 +172,9 @@ impl<P: EnginePose> Engine<P> {
         }
     }
 
-    /// The configuration.
+    /// The configuration this engine runs with. Beside a judge it is the
+    /// publishing engine's, with `outliers.enabled` off: the filter runs in
+    /// the judge.
     pub fn config(&self) -> &EngineConfig {
         &self.config
     }
@@ -205,10 +207,11 @@ impl<P: EnginePose> Engine<P> {
     /// Adds an edge between two known keyframes and returns its index. It
     /// joins the estimate when it links to the gauge's part of the graph.
     pub fn add_edge(&mut self, edge: EdgeInput<P>) -> Result<usize, EngineError> {
+        let held = self.judge.is_some() && edge.kind.switchable();
         self.submit(Op::Edge(edge))?;
         self.schedule.edge_added();
         let e = self.state.model.graph.edges().len() - 1;
-        if self.state.model.edges[e].pending {
+        if held {
             self.undecided.insert(e, self.keyframe_count());
         }
         Ok(e)
@@ -334,12 +337,14 @@ impl<P: EnginePose> Engine<P> {
 
     /// Re-solves inline over everything (abandoning a running re-solve):
     /// the polished estimate of the whole graph. With the filter on, it
-    /// first waits for the judge's closing decisions.
+    /// first waits for the judge's closing decisions and polishes from the
+    /// judge's map (and the two-stage solution), which depend on the input
+    /// alone: the same stream ends at the same map on every run.
     pub fn resolve_now(&mut self) -> UpdateReport {
-        let decisions = self.judge.as_mut().map(|j| j.close()).unwrap_or_default();
+        let (decisions, judged) = self.judge.as_mut().map(|j| j.close()).unwrap_or_default();
         let decided = decisions.len();
         self.take_decisions(decisions);
-        let moved = self.resolve_inline(Polish::Closing);
+        let moved = self.resolve_inline_from(Polish::Closing, &judged);
         self.version += 1;
         UpdateReport {
             version: self.version,
@@ -412,10 +417,17 @@ impl<P: EnginePose> Engine<P> {
     /// afterwards, the older one would leave the newest edges unpolished
     /// with no re-solve due.
     fn resolve_inline(&mut self, polish: Polish) -> usize {
+        self.resolve_inline_from(polish, &[])
+    }
+
+    /// [`Self::resolve_inline`] starting from `start` where it has a pose
+    /// (else from the estimate).
+    fn resolve_inline_from(&mut self, polish: Polish, start: &[P]) -> usize {
         self.background.abandon();
-        // what the swapped-in state replayed is pending, and a rebuild
+        // what the swapped-in state replayed is not connected yet, and a rebuild
         // polishes only connected edges: connect them first
         self.solve();
+        self.state.start_from(start);
         self.rebuild_inline(polish);
         self.stats.resolves += 1;
         self.solve()

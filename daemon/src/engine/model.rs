@@ -37,8 +37,6 @@ pub struct EdgeState {
     pub admitted: bool,
     /// Its terms are in the solvers.
     pub applied: bool,
-    /// A loop closure the judge has not decided yet: held out (switch 0).
-    pub pending: bool,
 }
 
 impl EdgeState {
@@ -48,13 +46,11 @@ impl EdgeState {
         switch: 1.0,
         admitted: false,
         applied: false,
-        pending: false,
     };
 
-    /// A new loop closure held out until the judge decides it.
-    pub const PENDING: EdgeState = EdgeState {
+    /// A new loop closure held out (switch 0) until the judge decides it.
+    pub const HELD: EdgeState = EdgeState {
         switch: 0.0,
-        pending: true,
         ..EdgeState::NEW
     };
 
@@ -85,7 +81,7 @@ pub struct Model<P: EnginePose = Pose2> {
     pub incident: Vec<Vec<u32>>,
     /// Edges received but not yet connected to the solvers (that happens at
     /// the next solve, odometry first).
-    pub pending: Vec<usize>,
+    pub unconnected: Vec<usize>,
     /// GPS fixes, in arrival order.
     pub fixes: Vec<GpsFix>,
     /// Whether each fix's prior is in the solver.
@@ -94,8 +90,9 @@ pub struct Model<P: EnginePose = Pose2> {
     pub georef: Option<Georef>,
     /// The weight of every GPS prior (the graph's variance factor).
     pub gps_weight: f64,
-    /// Loop closures wait for a judge's decision ([`EdgeState::PENDING`])
-    /// rather than pass the arrival gate: the publishing engine's model.
+    /// Loop closures wait for a judge's decision, held out
+    /// ([`EdgeState::HELD`]), rather than pass the arrival gate: the
+    /// publishing engine's model.
     pub judged: bool,
     /// The pairwise consistency of the loop closures. It depends on the
     /// input alone, so every copy of the model (a background re-solve's)

@@ -78,11 +78,11 @@ impl<P: EnginePose> State<P> {
     /// first: otherwise its loop closures met hundreds of dead-reckoned
     /// keyframes and entered the factor with large errors.
     pub fn replay(&mut self, op: &Op<P>, threshold: f64) -> Result<(), EngineError> {
-        if matches!(op, Op::Keyframe { .. }) && !self.model.pending.is_empty() {
+        if matches!(op, Op::Keyframe { .. }) && !self.model.unconnected.is_empty() {
             if self.hint.is_empty() {
                 self.solve(threshold)?;
             } else {
-                self.join_pending()?;
+                self.join_new()?;
             }
         }
         self.apply(op)
@@ -127,9 +127,10 @@ impl<P: EnginePose> State<P> {
         Ok(fresh)
     }
 
-    /// Connects the pending edges and fixes without solving.
-    pub fn join_pending(&mut self) -> Result<(), EngineError> {
-        let connected = self.connect_pending();
+    /// Connects the edges and fixes received since the last solve, without
+    /// solving.
+    pub fn join_new(&mut self) -> Result<(), EngineError> {
+        let connected = self.connect_new();
         self.apply_fixes().and(connected)
     }
 
@@ -157,10 +158,10 @@ impl<P: EnginePose> State<P> {
                     input.kind,
                 )?;
                 let held = self.model.judged && input.kind.switchable();
-                let state = if held { EdgeState::PENDING } else { EdgeState::NEW };
+                let state = if held { EdgeState::HELD } else { EdgeState::NEW };
                 self.model.edges.push(state);
                 self.chi2.push_edge();
-                self.model.pending.push(e);
+                self.model.unconnected.push(e);
                 Ok(())
             }
             Op::Gps(fix) => {
@@ -232,10 +233,7 @@ impl<P: EnginePose> State<P> {
     /// Sets loop closure `e`'s switch as the judge decided.
     fn set_switch(&mut self, e: usize, switch: f64) -> Result<(), EngineError> {
         self.check_switch(e, switch)?;
-        self.change(e, |s| {
-            s.switch = switch;
-            s.pending = false;
-        })
+        self.change(e, |s| s.switch = switch)
     }
 
     fn check_switch(&self, e: usize, switch: f64) -> Result<(), EngineError> {
@@ -265,7 +263,6 @@ impl<P: EnginePose> State<P> {
             let state = &mut self.model.edges[e];
             if state.applied {
                 state.switch = switch;
-                state.pending = false;
             } else if let Err(err) = self.set_switch(e, switch) {
                 result = Err(err);
             }
@@ -285,7 +282,7 @@ impl<P: EnginePose> State<P> {
                 self.refresh_edge(e);
             }
             Ok(())
-        } else if after > 0.0 && !self.model.pending.contains(&e) {
+        } else if after > 0.0 && !self.model.unconnected.contains(&e) {
             self.connect(e)
         } else {
             Ok(())
@@ -295,12 +292,12 @@ impl<P: EnginePose> State<P> {
     /// Connects the edges received since the last solve: odometry first, so
     /// that a new keyframe joins through its odometry (the best guess, and a
     /// short update path) and its loop closures find it joined.
-    fn connect_pending(&mut self) -> Result<(), EngineError> {
-        let mut pending = std::mem::take(&mut self.model.pending);
+    fn connect_new(&mut self) -> Result<(), EngineError> {
+        let mut unconnected = std::mem::take(&mut self.model.unconnected);
         let edges = self.model.graph.edges();
-        pending.sort_by_key(|&e| (edges[e].kind != EdgeKind::Odometry, e));
+        unconnected.sort_by_key(|&e| (edges[e].kind != EdgeKind::Odometry, e));
         let mut result = Ok(());
-        for &e in &pending {
+        for &e in &unconnected {
             // keep going: one failure must not strand the other edges
             if let Err(err) = self.connect(e) {
                 result = Err(err);
@@ -335,7 +332,7 @@ impl<P: EnginePose> State<P> {
                     continue;
                 }
                 (true, false) | (false, true) if self.model.weight(e) == 0.0 => {
-                    // an edge switched off, removed or pending constrains
+                    // an edge switched off, removed or held constrains
                     // nothing: it cannot join a keyframe
                     let k = if self.model.joined[i] { j } else { i };
                     self.model.wait_for(k, e);
@@ -469,7 +466,7 @@ impl<P: EnginePose> State<P> {
     /// and the cached χ² with it. Returns the number of keyframes that
     /// moved.
     pub fn solve(&mut self, threshold: f64) -> Result<usize, EngineError> {
-        let connected = self.join_pending();
+        let connected = self.join_new();
         // the buffer is reused: a fresh one per solve made the allocator
         // consolidate its free lists every keyframe
         let mut changed = std::mem::take(&mut self.moved);
@@ -496,6 +493,18 @@ impl<P: EnginePose> State<P> {
     /// drifted since the last call.
     pub fn take_drifted(&mut self) -> bool {
         self.gate.take_drifted()
+    }
+
+    /// Replaces the estimate of the joined keyframes `start` covers, for a
+    /// rebuild to start from (the solvers and the cached χ² are left as
+    /// they were: only a rebuild may follow).
+    pub fn start_from(&mut self, start: &[P]) {
+        let joined = self.model.joined.iter().zip(&mut self.estimate);
+        for ((&j, x), s) in joined.zip(start) {
+            if j {
+                *x = *s;
+            }
+        }
     }
 
     /// The estimate of every keyframe slot (meaningful where joined).
@@ -586,7 +595,7 @@ pub(super) mod tests {
         for state in [&mut plain, &mut hinted] {
             state.replay(&keyframe(2), 0.0).unwrap();
             state.replay(&odometry(1, 2, step), 0.0).unwrap();
-            state.join_pending().unwrap();
+            state.join_new().unwrap();
         }
         let anchor = plain.estimate()[1];
         assert!(close(plain.estimate()[2], anchor.compose(&step)));
@@ -596,7 +605,7 @@ pub(super) mod tests {
         hinted.clear_hints();
         hinted.replay(&keyframe(3), 0.0).unwrap();
         hinted.replay(&odometry(2, 3, step), 0.0).unwrap();
-        hinted.join_pending().unwrap();
+        hinted.join_new().unwrap();
         let k2 = hinted.estimate()[2];
         assert!(close(hinted.estimate()[3], k2.compose(&step)));
     }

@@ -34,8 +34,9 @@ pub struct ReplayOpts {
     /// Run the engine in this process instead of talking to a daemon.
     #[arg(long)]
     pub embedded: bool,
-    /// Publish at most this many keyframes per second (daemon mode; default:
-    /// each keyframe waits for its snapshot).
+    /// Send at most this many keyframes per second (default: into the
+    /// daemon, each keyframe waits for its snapshot; embedded, as fast as
+    /// the engine takes them).
     #[arg(long)]
     pub rate: Option<f64>,
     /// Ground truth for the ATE of the final estimate.
@@ -320,13 +321,15 @@ fn checkpoints(opts: &ReplayOpts, keyframes: usize) -> Vec<usize> {
 /// (`--embedded`) or the daemon of the configured namespace, which must
 /// serve `P`'s dimension.
 fn sink<P: ReplayPose>(opts: &ReplayOpts, config: &Config) -> anyhow::Result<Box<dyn Sink<P>>> {
-    if opts.embedded {
-        return Ok(Box::new(EmbeddedSink(Engine::<P>::create(engine_config(
-            opts, config,
-        )))));
-    }
     if opts.rate.is_some_and(|r| r.is_nan() || r <= 0.0) {
         bail!("--rate must be > 0");
+    }
+    if opts.embedded {
+        let engine = Engine::<P>::create(engine_config(opts, config));
+        let pace = opts
+            .rate
+            .map(|hz| (Instant::now(), Duration::from_secs_f64(1.0 / hz)));
+        return Ok(Box::new(EmbeddedSink(engine, pace)));
     }
     let timeout = Duration::from_secs_f64(opts.timeout);
     let daemon = DaemonSink::connect(&config.namespace, config, timeout, opts.rate, P::DIMENSION)?;

@@ -38,8 +38,9 @@ pub trait Sink<P: slamd::graph::RigidMotion = Pose2> {
     }
 }
 
-/// The engine in this process.
-pub struct EmbeddedSink<P: EnginePose = Pose2>(pub Engine<P>);
+/// The engine in this process, fed as fast as it takes keyframes or, with
+/// a pace `(start, period)`, keyframe `k` at `start + k · period`.
+pub struct EmbeddedSink<P: EnginePose = Pose2>(pub Engine<P>, pub Option<(Instant, Duration)>);
 
 /// What a replay does per dimension: a snapshot's poses read as the
 /// dimension's poses.
@@ -71,6 +72,12 @@ impl ReplayPose for Pose3 {
 
 impl<P: ReplayPose> Sink<P> for EmbeddedSink<P> {
     fn keyframe(&mut self, k: usize, step: &Step<P>) -> anyhow::Result<Vec<(usize, f64)>> {
+        if let Some((start, period)) = self.1 {
+            let slot = start + period * k as u32;
+            if let Some(left) = slot.checked_duration_since(Instant::now()) {
+                std::thread::sleep(left);
+            }
+        }
         self.0.add_keyframe(step.id, None)?;
         let arrival = Instant::now();
         for e in &step.edges {
