@@ -80,9 +80,19 @@ impl<P: EnginePose> Background<P> {
         self.hinted = n;
     }
 
-    /// Starts a job on `state`'s model and estimate.
-    pub fn start(&mut self, state: &State<P>, config: &EngineConfig, polish: Polish) {
-        let (model, estimate) = (state.model().clone(), state.estimate().to_vec());
+    /// Starts a job on `state`'s model, with the outlier filter's
+    /// `decided` switches set in it, and its estimate.
+    pub fn start(
+        &mut self,
+        state: &State<P>,
+        config: &EngineConfig,
+        polish: Polish,
+        decided: &[(usize, f64)],
+    ) {
+        let (mut model, estimate) = (state.model().clone(), state.estimate().to_vec());
+        for &(e, switch) in decided {
+            model.edges[e].switch = switch;
+        }
         self.log.clear();
         self.hinted = state.model.graph.len();
         let waker = self.waker.clone();

@@ -8,10 +8,11 @@
 //! updated at the same points, on a thread of its own. Its switches are
 //! therefore a function of the input, its order and the configuration,
 //! never of when a background re-solve landed or how loaded the machine
-//! is. After each update it sends the switches that changed, and the
-//! publishing engine applies them ([`Op::Switch`]) at its next update. A
-//! judge that falls behind delays decisions, never a snapshot: a robust
-//! re-solve it runs inline stalls only the judge.
+//! is. After each update it sends the switches that changed. The publishing
+//! engine takes them in with its next background job (a polish that swaps
+//! in when done), or inline ([`Op::Switch`]) at its next update when its
+//! re-solves run inline. A judge that falls behind delays decisions, never
+//! a snapshot: a robust re-solve it runs inline stalls only the judge.
 //!
 //! The contract between the two: edge `e` is the same edge on both sides
 //! (an op the publishing engine refused is not forwarded), the publishing
@@ -68,18 +69,22 @@ pub(super) struct Bench<P: EnginePose> {
 }
 
 impl<P: EnginePose> Bench<P> {
-    /// The judge over `engine`, which has sent the switches it holds (a
-    /// restored engine and its publishing twin hold the same).
-    fn new(engine: Engine<P>) -> Self {
-        let mut bench = Self {
+    /// The judge over `engine`, beside a publishing engine that holds the
+    /// switches `published` (`NaN` where pending): the first decisions
+    /// send whatever differs, and every pending one.
+    fn new(engine: Engine<P>, published: Vec<f64>) -> Self {
+        let edges = engine.graph().edges();
+        let switchable = (0..published.len())
+            .filter(|&e| edges[e].kind.switchable())
+            .collect();
+        Self {
             engine,
-            fresh: false,
-            unsettled: false,
-            sent: Vec::new(),
-            switchable: Vec::new(),
-        };
-        bench.decisions();
-        bench
+            // a restored judge has yet to send what it made of the map
+            fresh: !published.is_empty(),
+            unsettled: !published.is_empty(),
+            sent: published,
+            switchable,
+        }
     }
 
     /// Takes `ask`; returns the decisions of an update it made.
@@ -172,11 +177,11 @@ impl<P: EnginePose> Drop for Worker<P> {
 
 impl<P: EnginePose> Judge<P> {
     /// A judge over `engine` (built by [`judge_config`]; a restored one
-    /// holds the saved map), on its own thread when `threaded`. Its first
-    /// decisions cover every loop closure `engine` has connected.
-    pub fn new(engine: Engine<P>, threaded: bool) -> Self {
+    /// holds the saved map) beside a publishing engine holding the switches
+    /// `published` (`NaN`: pending), on its own thread when `threaded`.
+    pub fn new(engine: Engine<P>, published: Vec<f64>, threaded: bool) -> Self {
         debug_assert!(!engine.config.background && engine.config.outliers.enabled);
-        let mut bench = Bench::new(engine);
+        let mut bench = Bench::new(engine, published);
         if !threaded {
             return Judge::Inline(Box::new(bench), Vec::new());
         }
@@ -262,6 +267,14 @@ impl<P: EnginePose> Judge<P> {
         }
     }
 
+    /// Whether decisions wait to be taken.
+    pub fn has_decisions(&self) -> bool {
+        match self {
+            Judge::Inline(_, outbox) => !outbox.is_empty(),
+            Judge::Thread(w) => !w.decisions.is_empty(),
+        }
+    }
+
     /// The judge's counters as of the decisions taken last.
     pub fn stats(&self) -> EngineStats {
         match self {
@@ -300,7 +313,10 @@ impl<P: EnginePose> Engine<P> {
     pub(super) fn beside(mut engine: Self, judge: Self) -> Self {
         let threaded = engine.config.background;
         engine.state.model.judged = true;
-        engine.judge = Some(Judge::new(judge, threaded));
+        let published = (engine.state.model.edges.iter().enumerate())
+            .map(|(e, s)| if engine.is_pending(e) { f64::NAN } else { s.switch })
+            .collect();
+        engine.judge = Some(Judge::new(judge, published, threaded));
         engine
     }
 
@@ -314,9 +330,18 @@ impl<P: EnginePose> Engine<P> {
             self.schedule.edge_added();
         }
         for &(edge, _) in &decisions {
-            if let Some(arrived) = self.undecided.remove(&edge) {
+            if let Some(arrived) = self.undecided.get_mut(&edge).and_then(Option::take) {
                 self.decision_lags.push((keyframes - arrived) as u32);
             }
+        }
+        if self.config.background {
+            // taken in by the next background job, so that no snapshot waits
+            // for the polish they may call for
+            self.deferred.extend(decisions);
+            return;
+        }
+        for (edge, _) in &decisions {
+            self.undecided.remove(edge);
         }
         if decisions.len() <= BULK_DECISIONS {
             for (edge, switch) in decisions {

@@ -114,12 +114,15 @@ pub struct Engine<P: EnginePose = Pose2> {
     timestamps: Vec<u64>,
     /// With the filter on: the loop closures' judge ([`judge`]).
     judge: Option<Judge<P>>,
-    /// Loop closures awaiting the judge, with the keyframes received
-    /// when each arrived.
-    undecided: HashMap<usize, usize>,
+    /// Loop closures not yet in the estimate with the judge's switch, with
+    /// the keyframes received when each arrived (`None` once decided).
+    undecided: HashMap<usize, Option<usize>>,
     /// Keyframes from each decided loop closure's arrival to its first
     /// decision, in the order decided.
     decision_lags: Vec<u32>,
+    /// The judge's switches not yet in the estimate: the next background
+    /// job takes them in (with re-solves on their thread).
+    deferred: HashMap<usize, f64>,
 }
 
 impl Engine {
@@ -168,6 +171,7 @@ impl<P: EnginePose> Engine<P> {
             judge: None,
             undecided: HashMap::new(),
             decision_lags: Vec::new(),
+            deferred: HashMap::new(),
             config,
         }
     }
@@ -212,7 +216,7 @@ impl<P: EnginePose> Engine<P> {
         self.schedule.edge_added();
         let e = self.state.model.graph.edges().len() - 1;
         if held {
-            self.undecided.insert(e, self.keyframe_count());
+            self.undecided.insert(e, Some(self.keyframe_count()));
         }
         Ok(e)
     }
@@ -294,7 +298,10 @@ impl<P: EnginePose> Engine<P> {
         self.background.forward_estimates(&self.state);
         self.version += 1;
         if !self.background.running() {
-            if self.schedule.resolve_due(&self.config, &self.state) {
+            if !self.deferred.is_empty() {
+                // the judge's decisions enter with a polish, off this thread
+                self.start_job(Polish::Inline);
+            } else if self.schedule.resolve_due(&self.config, &self.state) {
                 self.start_job(Polish::Full);
             } else if self.schedule.refresh_due(&self.config) {
                 self.start_job(Polish::None);
@@ -330,9 +337,13 @@ impl<P: EnginePose> Engine<P> {
         self.background.wake_with(wake);
     }
 
-    /// True while a re-solve runs on its thread.
+    /// True while a re-solve runs on its thread or decisions of the
+    /// outlier filter wait to be taken in: an [`Self::update`] then has
+    /// news to publish.
     pub fn resolving(&self) -> bool {
         self.background.running()
+            || !self.deferred.is_empty()
+            || self.judge.as_ref().is_some_and(|j| j.has_decisions())
     }
 
     /// Re-solves inline over everything (abandoning a running re-solve):
@@ -427,6 +438,14 @@ impl<P: EnginePose> Engine<P> {
         // what the swapped-in state replayed is not connected yet, and a rebuild
         // polishes only connected edges: connect them first
         self.solve();
+        // the rebuild takes the judge's deferred switches in
+        let deferred: Vec<(usize, f64)> = self.deferred.drain().collect();
+        for (e, _) in &deferred {
+            self.undecided.remove(e);
+        }
+        if let Err(e) = self.state.set_switches_for_rebuild(&deferred) {
+            tracing::error!(error = %e, "Cannot take a decision of the judge.");
+        }
         self.state.start_from(start);
         self.rebuild_inline(polish);
         self.stats.resolves += 1;
@@ -480,7 +499,8 @@ impl<P: EnginePose> Engine<P> {
     fn start_job(&mut self, polish: Polish) {
         self.schedule.started(polish, &self.state);
         if self.config.background {
-            self.background.start(&self.state, &self.config, polish);
+            let decided: Vec<(usize, f64)> = self.deferred.iter().map(|(&e, &s)| (e, s)).collect();
+            self.background.start(&self.state, &self.config, polish, &decided);
         } else if let Some(outcome) = background::run_inline(&self.state, &self.config, polish) {
             self.swap_in(outcome, Vec::new());
         }
@@ -508,6 +528,15 @@ impl<P: EnginePose> Engine<P> {
             return false;
         };
         self.replace_state(state, base);
+        let edges = &self.state.model.edges;
+        let undecided = &mut self.undecided;
+        self.deferred.retain(|&e, s| {
+            let waits = edges[e].switch != *s;
+            if !waits {
+                undecided.remove(&e);
+            }
+            waits
+        });
         self.schedule.fresh(&self.state);
         if polish == Polish::None {
             self.stats.refreshes += 1;

@@ -24,14 +24,20 @@ use crate::store::{MapEdge, MapFile, MapKeyframe, SavedGeoref};
 use std::collections::VecDeque;
 
 /// The state of `map`'s graph, with its GPS fixes in `frame`, polished
-/// as `polish` says before the factor is built.
+/// as `polish` says before the factor is built. A pending loop closure is
+/// held out (switch 0) when `judged` (beside a judge), else on (switch 1,
+/// as a new edge before the arrival gate).
 pub(super) fn state_of<P: EnginePose>(
     map: &MapFile<P>,
     frame: Option<LocalFrame>,
     polish: Polish,
     config: &EngineConfig,
+    judged: bool,
 ) -> Result<State<P>, EngineError> {
-    let mut model = Model::default();
+    let mut model = Model {
+        judged,
+        ..Model::default()
+    };
     let mut lin = Vec::with_capacity(map.keyframes.len());
     for k in &map.keyframes {
         model.graph.add_keyframe(k.id, k.guess)?;
@@ -44,9 +50,14 @@ pub(super) fn state_of<P: EnginePose>(
         model
             .graph
             .add_edge(i.from, i.to, i.measurement, i.information, i.kind)?;
+        let switch = match (e.pending, judged) {
+            (true, true) => 0.0,
+            (true, false) => 1.0,
+            (false, _) => e.switch,
+        };
         model.edges.push(EdgeState {
             scale: e.scale,
-            switch: e.switch,
+            switch,
             ..EdgeState::NEW
         });
     }
@@ -132,14 +143,15 @@ fn fix_of<P: EnginePose>(
     Ok(GpsFix::at(f, &position, k, &frame))
 }
 
-/// The map `state` holds, with each keyframe's timestamp (its edges'
-/// origins, the acknowledgements and the held messages are the daemon's
-/// to fill in).
+/// The map `state` holds, with each keyframe's timestamp and the loop
+/// closures still `pending` (its edges' origins, the acknowledgements and
+/// the held messages are the daemon's to fill in).
 pub(super) fn map_of<P: EnginePose>(
     state: &State<P>,
     origin: Option<Geodetic>,
     fixes: &[FixInput],
     timestamps: &[u64],
+    pending: impl Fn(usize) -> bool,
 ) -> MapFile<P> {
     let m = &state.model;
     let (estimate, lin) = (state.estimate(), state.linearisation());
@@ -160,6 +172,7 @@ pub(super) fn map_of<P: EnginePose>(
             edge: m.graph.edge_input(e),
             scale: m.edges[e].scale,
             switch: m.edges[e].switch,
+            pending: pending(e),
             origin: slamd_protocol::codec::Origin {
                 frontend: 0,
                 sequence: 0,
@@ -193,18 +206,25 @@ impl<P: EnginePose> Engine<P> {
         polish: bool,
     ) -> Result<Self, EngineError> {
         if !config.outliers.enabled {
-            return Self::restore_whole(config, map, polish);
+            return Self::restore_whole(config, map, polish, false);
         }
-        let judge = Self::restore_whole(judge::judge_config(&config), map, polish)?;
-        let engine = Self::restore_whole(judge::published_config(&config), map, polish)?;
+        // the judge re-solves before it decides what was pending
+        let pending: Vec<usize> = (0..map.edges.len()).filter(|&e| map.edges[e].pending).collect();
+        let judge_polish = polish || !pending.is_empty();
+        let judge = Self::restore_whole(judge::judge_config(&config), map, judge_polish, false)?;
+        let mut engine = Self::restore_whole(judge::published_config(&config), map, polish, true)?;
+        let keyframes = engine.keyframe_count();
+        engine.undecided = pending.into_iter().map(|e| (e, Some(keyframes))).collect();
         Ok(Self::beside(engine, judge))
     }
 
     /// [`Self::restore`] for an engine that applies its own filter, if on.
+    /// `judged`: the publishing engine beside a judge.
     fn restore_whole(
         config: EngineConfig,
         map: &crate::store::MapFile<P>,
         polish: bool,
+        judged: bool,
     ) -> Result<Self, EngineError> {
         let mut engine = Self::whole(config);
         if let Some(o) = map.origin {
@@ -221,7 +241,7 @@ impl<P: EnginePose> Engine<P> {
                 .map(LocalFrame::new);
         }
         let polish = if polish { Polish::Full } else { Polish::None };
-        let state = state_of(map, engine.frame, polish, &engine.config)?;
+        let state = state_of(map, engine.frame, polish, &engine.config, judged)?;
         engine.work_base = state.work();
         engine.schedule.fresh(&state);
         engine.schedule.polished(&state);
@@ -239,6 +259,12 @@ impl<P: EnginePose> Engine<P> {
     /// switches, the estimate, the GPS origin, fixes and georeference.
     /// Edge origins, acknowledgements and held messages are left empty.
     pub fn map(&self) -> crate::store::MapFile<P> {
-        map_of(&self.state, self.gps_origin(), &self.fixes, &self.timestamps)
+        map_of(
+            &self.state,
+            self.gps_origin(),
+            &self.fixes,
+            &self.timestamps,
+            |e| self.is_pending(e),
+        )
     }
 }

@@ -207,7 +207,9 @@ impl<P: EnginePose> Fold<P> {
                 None => map.edges.push(MapEdge {
                     edge: e,
                     scale: 1.0,
-                    switch: 1.0,
+                    // the outlier filter has yet to decide it
+                    switch: if e.kind.switchable() { 0.0 } else { 1.0 },
+                    pending: e.kind.switchable(),
                     origin: o,
                 }),
             },

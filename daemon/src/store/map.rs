@@ -67,6 +67,9 @@ pub struct MapEdge<P: RigidMotion = Pose2> {
     pub scale: f64,
     /// The outlier filter's switch.
     pub switch: f64,
+    /// A loop closure the filter had not decided: held out (switch 0)
+    /// until it does.
+    pub pending: bool,
     /// Who sent it.
     pub origin: Origin,
 }
@@ -152,6 +155,7 @@ impl<P: RigidMotion> MapFile<P> {
                 edge: graph.edge_input(e),
                 scale: 1.0,
                 switch: 1.0,
+                pending: false,
                 origin: Origin {
                     frontend: 0,
                     sequence: 0,
@@ -182,7 +186,7 @@ impl<P: RigidMotion> MapFile<P> {
         for e in &self.edges {
             put_edge(&mut p, &e.edge);
             p.f64(e.scale);
-            p.f64(e.switch);
+            p.f64(if e.pending { PENDING_SWITCH } else { e.switch });
             p.u32(e.origin.frontend);
             p.u64(e.origin.sequence);
         }
@@ -275,6 +279,9 @@ impl MapFile {
     }
 }
 
+/// The switch a map (format 5 on) writes for a pending loop closure.
+const PENDING_SWITCH: f64 = -1.0;
+
 fn corrupt(path: &Path, why: &str) -> StoreError {
     StoreError::Corrupt {
         path: path.to_path_buf(),
@@ -316,6 +323,8 @@ fn decode_body<P: RigidMotion>(body: &[u8], generation: u64, version: u32) -> Re
         let edge = edge_of_version(get_edge(&mut g)?, version);
         let scale = g.f64()?;
         let switch = g.f64()?;
+        let pending = version >= 5 && switch == PENDING_SWITCH;
+        let switch = if pending { 0.0 } else { switch };
         if !(scale.is_finite() && scale >= 0.0 && (0.0..=1.0).contains(&switch)) {
             return Err(StoreError::Malformed(format!(
                 "edge {}→{}: scale {scale}, switch {switch}",
@@ -330,6 +339,7 @@ fn decode_body<P: RigidMotion>(body: &[u8], generation: u64, version: u32) -> Re
             edge,
             scale,
             switch,
+            pending,
             origin,
         });
     }

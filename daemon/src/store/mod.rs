@@ -49,7 +49,9 @@ use std::time::Duration;
 /// one, and one `u64` per keyframe at the end of the map body. Version 4
 /// keeps every edge as written; an older file's newer-id-first edges are
 /// read in the meaning slamd gave them then (`record::edge_of_version`).
-pub const FORMAT_VERSION: u32 = 4;
+/// Version 5 marks in the map the loop closures the outlier filter had not
+/// decided yet (a switch of −1), which a restart holds out again.
+pub const FORMAT_VERSION: u32 = 5;
 
 /// The oldest format version this slamd reads.
 pub const OLDEST_FORMAT: u32 = 1;

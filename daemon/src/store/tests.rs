@@ -240,6 +240,7 @@ fn sample_map() -> MapFile {
             edge: EdgeInput::new(4, 9, Pose2::new(1.0, 2.0, 0.3), info, EdgeKind::LoopClosure),
             scale: 1.0,
             switch: 0.25,
+            pending: false,
             origin: origin(2),
         }],
         origin: Some(Geodetic::new(45.0, 9.0, 100.0).unwrap()),
@@ -368,6 +369,20 @@ fn old_map_file(version: u32, generation: u64, body: &[u8]) -> Vec<u8> {
 /// solved them (its own edges were stored turned already; held edges
 /// were not).
 #[test]
+fn a_pending_loop_closure_reads_back_pending_and_only_from_this_format() {
+    let mut map = sample_map();
+    map.edges[0].switch = 0.0;
+    map.edges[0].pending = true;
+    let bytes = map.encode();
+    let path = Path::new("pending.map");
+    assert_eq!(MapFile::decode(path, &bytes).unwrap(), map);
+    // format 4 had no pending loop closures: its switch of −1 is damage
+    let old = old_map_file(4, map.generation, &bytes[journal::HEAD + 8..]);
+    let err = MapFile::<Pose2>::decode(path, &old).unwrap_err();
+    assert!(err.to_string().contains("switch -1"), "{err}");
+}
+
+#[test]
 fn a_version_3_map_reads_newer_first_edges_as_it_solved_them() {
     let mut map = sample_map();
     let Record::Edge(o, held) = newer_first_loop_closure(6) else {
@@ -460,6 +475,7 @@ fn a_3d_map_reads_back_and_a_2d_reader_refuses_it() {
             edge: EdgeInput::new(1, 2, z, Information6::identity(), EdgeKind::Odometry),
             scale: 1.0,
             switch: 1.0,
+            pending: false,
             origin: origin(2),
         }],
         held: vec![Record::Keyframe(origin(3), 7, Some(z), 5)],
