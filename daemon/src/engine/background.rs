@@ -91,7 +91,9 @@ impl<P: EnginePose> Background<P> {
     ) {
         let (mut model, estimate) = (state.model().clone(), state.estimate().to_vec());
         for &(e, switch) in decided {
-            model.edges[e].switch = switch;
+            if let Some(state) = model.edges.get_mut(e) {
+                state.switch = switch;
+            }
         }
         self.log.clear();
         self.hinted = state.model.graph.len();

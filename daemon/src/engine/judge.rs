@@ -336,8 +336,17 @@ impl<P: EnginePose> Engine<P> {
         }
         if self.config.background {
             // taken in by the next background job, so that no snapshot waits
-            // for the polish they may call for
-            self.deferred.extend(decisions);
+            // for the polish they may call for; one that changes nothing
+            // (a pending loop closure held off) is in already
+            for (edge, switch) in decisions {
+                let now = self.state.model.edges.get(edge).map(|s| s.switch);
+                if now == Some(switch) {
+                    self.deferred.remove(&edge);
+                    self.undecided.remove(&edge);
+                } else {
+                    self.deferred.insert(edge, switch);
+                }
+            }
             return;
         }
         for (edge, _) in &decisions {

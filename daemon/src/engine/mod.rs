@@ -531,7 +531,7 @@ impl<P: EnginePose> Engine<P> {
         let edges = &self.state.model.edges;
         let undecided = &mut self.undecided;
         self.deferred.retain(|&e, s| {
-            let waits = edges[e].switch != *s;
+            let waits = edges.get(e).is_some_and(|state| state.switch != *s);
             if !waits {
                 undecided.remove(&e);
             }
