@@ -58,7 +58,8 @@ pub enum Polish {
     /// The nonlinearity check's inline re-solve: the robust polish from
     /// the current estimate alone; the next background re-solve has the
     /// two-stage starts (inline they cost a keyframe seconds and, from the
-    /// estimate's basin, reach the same optimum).
+    /// estimate's basin, reach the same optimum). Also the background job
+    /// that takes the outlier filter's decisions into the estimate.
     Inline,
     /// None: refactorise at the estimate.
     None,
