@@ -325,11 +325,9 @@ impl<P: EnginePose> Engine<P> {
     /// rebuilt.
     pub(super) fn take_decisions(&mut self, decisions: Decisions) {
         let keyframes = self.keyframe_count();
-        for _ in &decisions {
+        for &(edge, _) in &decisions {
             // a re-solve is due for them as for new edges
             self.schedule.edge_added();
-        }
-        for &(edge, _) in &decisions {
             if let Some(arrived) = self.undecided.get_mut(&edge).and_then(Option::take) {
                 self.decision_lags.push((keyframes - arrived) as u32);
             }

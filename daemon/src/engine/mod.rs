@@ -412,16 +412,11 @@ impl<P: EnginePose> Engine<P> {
             Some(judge) => judge.stats().drift_resolves,
             None => self.stats.drift_resolves,
         };
-        let mut lags = self.decision_lags.clone();
-        lags.sort_unstable();
-        let at = |q: f64| lags.get(((lags.len() as f64 * q) as usize).min(lags.len().saturating_sub(1)));
-        let decision_lag = [at(0.5), at(0.99), lags.last()].map(|l| l.copied().unwrap_or(0));
         EngineStats {
             factor_nnz: self.state.factor_nnz(),
             work,
             drift_resolves,
             pending: self.undecided.len(),
-            decision_lag,
             ..self.stats
         }
     }

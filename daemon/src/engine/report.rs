@@ -69,10 +69,6 @@ pub struct EngineStats {
     pub drift_resolves: usize,
     /// Loop closures awaiting the judge's decision now.
     pub pending: usize,
-    /// Keyframes from a loop closure's arrival to the judge's first
-    /// decision on it: median, 99th percentile and largest, over the loop
-    /// closures decided so far ([`Engine::decision_lags`](super::Engine::decision_lags)).
-    pub decision_lag: [u32; 3],
     /// Entries of the Gauss–Newton factor now.
     pub factor_nnz: usize,
     /// What the updates and solves on this thread have swept of the

@@ -161,6 +161,9 @@ pub struct Outcome<P = Pose2> {
     pub checked: Vec<(usize, Vec<P>)>,
     /// The final switch of each edge, in file order (embedded only).
     pub switches: Option<Vec<f64>>,
+    /// Keyframes from each loop closure's arrival to the outlier filter's
+    /// decision on it (embedded only).
+    pub decision_lags: Vec<f64>,
 }
 
 /// Streams `graph` into `sink`; `progress` is told of each keyframe.
@@ -233,6 +236,7 @@ pub fn replay<P: RigidMotion>(
         resolves,
         poses,
         checked,
+        decision_lags: sink.decision_lags().into_iter().map(f64::from).collect(),
     })
 }
 

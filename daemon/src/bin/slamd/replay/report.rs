@@ -18,6 +18,8 @@ pub struct Report {
     pub closing_s: f64,
     pub resolves: usize,
     pub engine: Option<EngineStats>,
+    /// Percentiles of the outlier filter's decision lags, in keyframes.
+    pub decisions: Latency,
     pub chi2: f64,
     pub ate: Option<f64>,
     pub checked: usize,
@@ -61,6 +63,7 @@ impl Report {
             robust: Rejected::of(graph, out.switches.as_deref()),
             switched: out.switches.is_some(),
             latency: Latency::of(out.latencies),
+            decisions: Latency::of(out.decision_lags),
         })
     }
 
@@ -97,7 +100,7 @@ impl Report {
                 "walked_entries": s.work.walked,
                 "solved_entries": s.work.solved,
                 "pending": s.pending,
-                "decision_lag_keyframes": s.decision_lag,
+                "decision_lag_keyframes": ([self.decisions.p50, self.decisions.p99, self.decisions.max].map(|k| k as u64)),
             })),
             "chi2": self.chi2,
             "ate": self.ate,

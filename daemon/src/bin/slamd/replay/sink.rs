@@ -36,6 +36,12 @@ pub trait Sink<P: slamd::graph::RigidMotion = Pose2> {
     fn engine_stats(&self) -> Option<EngineStats> {
         None
     }
+
+    /// Keyframes from each loop closure's arrival to the outlier filter's
+    /// decision on it (the engine's, embedded; else none).
+    fn decision_lags(&self) -> Vec<u32> {
+        Vec::new()
+    }
 }
 
 /// The engine in this process, fed as fast as it takes keyframes or, with
@@ -121,6 +127,10 @@ impl<P: ReplayPose> Sink<P> for EmbeddedSink<P> {
 
     fn engine_stats(&self) -> Option<EngineStats> {
         Some(self.0.stats())
+    }
+
+    fn decision_lags(&self) -> Vec<u32> {
+        self.0.decision_lags().to_vec()
     }
 }
 
