@@ -206,3 +206,66 @@ fn a_full_disk_holds_the_stream_until_space_returns() {
     let map = MapFile::<Pose2>::read(&state.join("map")).expect("a checkpoint on SIGTERM");
     assert_eq!(map.keyframes.len(), 3500);
 }
+
+/// A frontend's wait for an acknowledgement outlasts its silence bound
+/// while the daemon is alive but holding: Manhattan published at once to a
+/// daemon whose state directory sits on a 300 KiB tmpfs, grown to 100 MiB
+/// 10 s later. `wait_acknowledged` with a 3 s bound waits through the
+/// hold, told that the daemon holds and asked to say so, and returns once
+/// every message is acknowledged; with the daemon stopped, the same call
+/// gives up after its bound.
+#[test]
+fn a_frontend_waits_for_a_daemon_that_holds_its_acknowledgements() {
+    use slamd::ipc::{Endpoint, Frontend};
+    use std::time::Instant;
+    let mount = fresh_dir("durable-frontend-holds");
+    let tmpfs = Tmpfs::mount(&mount, "300k");
+    let state = mount.join("state");
+    let namespace = format!("slamd-test-{}-frontend-holds", std::process::id());
+    let daemon = Daemon::serve(&namespace, &["--state", state.to_str().unwrap()], &[]);
+    let started = Instant::now();
+    let grow = std::thread::spawn(move || {
+        std::thread::sleep(Duration::from_secs(10));
+        tmpfs.resize("100m");
+        tmpfs
+    });
+    let g = read("manhattanolson3500_g2oversion.g2o");
+    let mut f = Frontend::connect(Endpoint::new(&namespace)).unwrap();
+    for (k, group) in g.by_newer().iter().enumerate() {
+        f.add_keyframe(g.id_of(k), 0, None).unwrap();
+        for &e in group {
+            f.add_edge(&g.edge_input(e)).unwrap();
+        }
+        f.flush().unwrap();
+    }
+    let last = f.last_sequence();
+    let silence = Duration::from_secs(3);
+    let (mut held, mut said) = (false, false);
+    let waiting = Instant::now();
+    let acknowledged = f
+        .wait_acknowledged_with(last, silence, |w| {
+            held |= w.holding;
+            said |= w.say && w.to_string().contains("its journal cannot be written");
+            true
+        })
+        .unwrap();
+    assert!(
+        acknowledged,
+        "gave up after {:.1} s",
+        waiting.elapsed().as_secs_f64()
+    );
+    assert!(held && said, "held {held}, said {said}");
+    assert!(
+        waiting.elapsed() > silence && started.elapsed() >= Duration::from_secs(10),
+        "the wait outlasted its bound: {:.1} s",
+        waiting.elapsed().as_secs_f64()
+    );
+    assert_eq!(f.unacknowledged(), 0);
+    let _tmpfs = grow.join().unwrap();
+    assert!(daemon.stop().success());
+    assert!(!f.wait_acknowledged(last + 1, Duration::from_secs(1)).unwrap());
+    let gone = Instant::now();
+    let after = f.add_keyframe(1_000_000, 0, None).unwrap();
+    assert!(!f.wait_acknowledged(after, Duration::from_secs(1)).unwrap());
+    assert!(gone.elapsed() < Duration::from_secs(5), "{:?}", gone.elapsed());
+}

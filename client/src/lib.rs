@@ -71,7 +71,7 @@ pub use slamd_protocol::transport::{
     SnapshotLink as Snapshots, SnapshotSample, SwitchesSample, TransportError,
 };
 pub use slamd_protocol::{
-    Endpoint, Frontend, Pose, Rejection, RejectionReason, SnapshotHeader, Switch, SwitchesHeader,
+    Endpoint, Frontend, Pose, Rejection, RejectionReason, SnapshotHeader, Switch, SwitchesHeader, Waiting,
 };
 pub use slamd_types::{
     EdgeInput, EdgeKind, FixInput, Geodetic, Information, Information6, KeyframeId, Pose2, Pose3,

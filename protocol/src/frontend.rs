@@ -9,6 +9,12 @@
 //! ones it already had. A send that finds the daemon gone (its queue full
 //! past the backpressure timeout) waits for a daemon to come back, up to
 //! the reconnect bound, then fails with [`TransportError::DaemonGone`].
+//!
+//! A daemon that is alive shows it: it publishes its status with every
+//! snapshot and on every idle tick, also while it holds acknowledgements
+//! (its journal cannot be written). A frontend waiting for an
+//! acknowledgement, or for room in the daemon's queue, keeps waiting as
+//! long as statuses come, and gives up only after its bound with none.
 
 use crate::codec::{edge_out, gps_out, keyframe_out, Origin};
 use crate::message::{Edge, GpsFix, Keyframe};
@@ -57,6 +63,44 @@ const POKE_EVERY: usize = 256;
 /// How often a frontend waiting for a daemon looks again.
 const POLL: Duration = Duration::from_millis(10);
 
+/// A frontend waiting for a daemon that is alive says why at most this
+/// often (and first after this long).
+pub const SAY_EVERY: Duration = Duration::from_secs(5);
+
+/// A wait for an acknowledgement, as it stands at one look: what
+/// [`Frontend::wait_acknowledged_with`] hands its caller between looks.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Waiting {
+    /// The daemon's namespace.
+    pub namespace: String,
+    /// The message waited for.
+    pub sequence: u64,
+    /// How long the wait has lasted.
+    pub waited: Duration,
+    /// Whether the daemon's last status said it holds acknowledgements
+    /// because its journal cannot be written.
+    pub holding: bool,
+    /// Whether to say why now: the wait has lasted [`SAY_EVERY`], and that
+    /// long has passed since it was last said.
+    pub say: bool,
+}
+
+impl std::fmt::Display for Waiting {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let why = if self.holding {
+            "holds its acknowledgements: its journal cannot be written (a full disk?)".to_string()
+        } else {
+            format!("has not acknowledged message {} yet", self.sequence)
+        };
+        write!(
+            f,
+            "the daemon serving `{}` is alive but {why}; waiting ({:.0} s so far)",
+            self.namespace,
+            self.waited.as_secs_f64()
+        )
+    }
+}
+
 static NEXT: AtomicU32 = AtomicU32::new(1);
 
 /// One message as sent.
@@ -82,6 +126,11 @@ pub struct Frontend {
     acked: u64,
     /// Sends again after a daemon restart.
     resent: u64,
+    /// When the daemon last published a status (or the frontend
+    /// connected).
+    heard: Instant,
+    /// Whether that status said it holds acknowledgements.
+    holding: bool,
 }
 
 impl Frontend {
@@ -92,7 +141,9 @@ impl Frontend {
         let link = FrontendLink::open(&endpoint.namespace, endpoint.backpressure)?;
         // nonzero and distinct across processes and connections
         let id = (std::process::id().wrapping_mul(2654435761) ^ NEXT.fetch_add(1, Ordering::Relaxed)).max(1);
-        let instance = link.latest_status()?.map_or(0, |a| a.instance);
+        let status = link.latest_status()?;
+        let instance = status.map_or(0, |a| a.instance);
+        let holding = status.is_some_and(|a| a.journal_failing != 0);
         Ok(Self {
             link,
             endpoint,
@@ -102,6 +153,8 @@ impl Frontend {
             instance,
             acked: 0,
             resent: 0,
+            heard: Instant::now(),
+            holding,
         })
     }
 
@@ -136,6 +189,19 @@ impl Frontend {
     /// Messages sent again to a restarted daemon so far.
     pub fn resent(&self) -> u64 {
         self.resent
+    }
+
+    /// How long since the daemon last showed it is alive (a status seen by
+    /// [`Self::poll`], or the connection).
+    pub fn silent_for(&self) -> Duration {
+        self.heard.elapsed()
+    }
+
+    /// Whether the daemon's last status said it holds acknowledgements
+    /// because its journal cannot be written (a full disk): it is alive
+    /// and resumes when it can write.
+    pub fn holding(&self) -> bool {
+        self.holding
     }
 
     /// Publishes a planar keyframe (to a 2-D daemon); returns its message
@@ -230,6 +296,8 @@ impl Frontend {
         let Some(a) = self.link.latest_status()? else {
             return Ok(false);
         };
+        self.heard = Instant::now();
+        self.holding = a.journal_failing != 0;
         let acked = a.ack_of(self.id).unwrap_or(0);
         self.forget_through(acked);
         if a.instance == self.instance {
@@ -245,18 +313,62 @@ impl Frontend {
     }
 
     /// Waits until the daemon has acknowledged message `sequence`, riding
-    /// out daemon restarts; `false` if `timeout` passed first.
-    pub fn wait_acknowledged(&mut self, sequence: u64, timeout: Duration) -> Result<bool, TransportError> {
-        let deadline = Instant::now() + timeout;
+    /// out daemon restarts, for as long as the daemon shows it is alive:
+    /// `false` only once `silence` has passed with no status from it (it is
+    /// gone, or was never there). A daemon that holds acknowledgements
+    /// (its journal cannot be written) is waited for; why is logged
+    /// (`tracing`, warning) at most every [`SAY_EVERY`]. A message not yet
+    /// sent is never acknowledged: `false` at once.
+    pub fn wait_acknowledged(&mut self, sequence: u64, silence: Duration) -> Result<bool, TransportError> {
+        self.wait_acknowledged_with(sequence, silence, |w| {
+            if w.say {
+                tracing::warn!("{w}");
+            }
+            true
+        })
+    }
+
+    /// [`Self::wait_acknowledged`], calling `between` at every look (every
+    /// 10 ms) with how the wait stands; `between` saying `false` ends the
+    /// wait with `false` (an interrupt), and it decides what to do with
+    /// [`Waiting::say`].
+    pub fn wait_acknowledged_with(
+        &mut self,
+        sequence: u64,
+        silence: Duration,
+        mut between: impl FnMut(&Waiting) -> bool,
+    ) -> Result<bool, TransportError> {
+        if sequence > self.sequence {
+            return Ok(false);
+        }
+        let started = Instant::now();
+        // a status seen before the wait began counts from the wait
+        self.heard = self.heard.max(started);
+        let mut said: Option<Instant> = None;
         loop {
             self.poll()?;
             if self.acked >= sequence {
                 return Ok(true);
             }
-            if Instant::now() >= deadline {
+            if self.silent_for() >= silence {
                 return Ok(false);
             }
-            std::thread::sleep(POLL.min(deadline.saturating_duration_since(Instant::now())));
+            let waited = started.elapsed();
+            let say = waited >= SAY_EVERY && said.is_none_or(|t| t.elapsed() >= SAY_EVERY);
+            if say {
+                said = Some(Instant::now());
+            }
+            let w = Waiting {
+                namespace: self.endpoint.namespace.clone(),
+                sequence,
+                waited,
+                holding: self.holding,
+                say,
+            };
+            if !between(&w) {
+                return Ok(false);
+            }
+            std::thread::sleep(POLL.min(silence.saturating_sub(self.silent_for())));
         }
     }
 
@@ -342,14 +454,16 @@ impl Frontend {
         Ok(())
     }
 
-    /// The daemon's queue stayed full: it is gone or stuck. Waits for a
-    /// new daemon (then everything kept went to it) or for the queue to
-    /// take the newest message, up to the reconnect bound.
+    /// The daemon's queue stayed full: it is gone, stuck or holding. Waits
+    /// for a new daemon (then everything kept went to it) or for the queue
+    /// to take the newest message, for the reconnect bound and then as
+    /// long as the daemon keeps publishing statuses.
     fn await_daemon(&mut self) -> Result<(), TransportError> {
         let started = Instant::now();
         let before = self.instance;
         let _ = self.link.poke();
-        while started.elapsed() < self.endpoint.reconnect {
+        let reconnect = self.endpoint.reconnect;
+        while started.elapsed() < reconnect || self.silent_for() < reconnect {
             std::thread::sleep(POLL);
             self.poll()?;
             if self.instance != before {

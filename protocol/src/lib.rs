@@ -30,7 +30,7 @@ pub mod message;
 pub mod service;
 pub mod transport;
 
-pub use frontend::{Endpoint, Frontend};
+pub use frontend::{Endpoint, Frontend, Waiting, SAY_EVERY};
 pub use message::{
     DaemonStatus, Edge, EdgeKindWire, FrontendAck, GpsFix, Keyframe, Pose, Rejection, RejectionReason,
     SnapshotHeader, Switch, SwitchesHeader, INFORMATION_UPPER, MAX_FRONTENDS, POSE_PARAMS, PROTOCOL_VERSION,

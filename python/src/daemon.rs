@@ -106,22 +106,47 @@ impl Frontend {
         self.link.flush().map_err(error)
     }
 
-    /// Waits up to `timeout` seconds until the daemon has acknowledged
-    /// message `sequence` (default: the last one sent); False on timeout.
-    /// Ctrl-C interrupts it.
+    /// Waits until the daemon has acknowledged message `sequence` (default:
+    /// the last one sent), for as long as the daemon shows it is alive:
+    /// False once `timeout` seconds pass with no status from it (gone, or
+    /// never there). A daemon that holds acknowledgements (its journal
+    /// cannot be written) is waited for, and why is logged on the `slamd`
+    /// logger (warning) at most every 5 s. Ctrl-C interrupts it.
     #[pyo3(signature = (sequence = None, timeout = 10.0))]
     fn wait_acknowledged(&mut self, py: Python<'_>, sequence: Option<u64>, timeout: f64) -> PyResult<bool> {
         let sequence = sequence.unwrap_or(self.link.last_sequence());
-        let deadline = deadline(timeout)?;
-        loop {
-            let slice = deadline.saturating_duration_since(Instant::now()).min(SLICE);
-            if self.link.wait_acknowledged(sequence, slice).map_err(error)? {
-                return Ok(true);
-            }
-            py.check_signals()?;
-            if Instant::now() >= deadline {
-                return Ok(false);
-            }
+        let silence = Duration::try_from_secs_f64(timeout).map_err(error)?;
+        let logger = py.import("logging")?.call_method1("getLogger", ("slamd",))?;
+        let mut failed: Option<PyErr> = None;
+        let mut last_look = Instant::now();
+        let done = self
+            .link
+            .wait_acknowledged_with(sequence, silence, |w| {
+                let said = if w.say {
+                    logger.call_method1("warning", (w.to_string(),)).map(drop)
+                } else {
+                    Ok(())
+                };
+                // the waits keep the GIL (the iceoryx2 ports cannot leave
+                // their thread): look for Ctrl-C every SLICE
+                let checked = if last_look.elapsed() >= SLICE {
+                    last_look = Instant::now();
+                    py.check_signals()
+                } else {
+                    Ok(())
+                };
+                match said.and(checked) {
+                    Ok(()) => true,
+                    Err(e) => {
+                        failed = Some(e);
+                        false
+                    }
+                }
+            })
+            .map_err(error)?;
+        match failed {
+            Some(e) => Err(e),
+            None => Ok(done),
         }
     }
 }

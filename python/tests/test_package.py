@@ -4,6 +4,7 @@ and a real daemon, checked against the `slamd` command and exact worlds."""
 import json
 import math
 import subprocess
+import time
 
 import numpy as np
 import pytest
@@ -198,3 +199,11 @@ def test_frontend_and_snapshots_talk_to_a_real_daemon(daemons):
     assert list(snap.timestamps) == [1_000 * k for k in range(8)]
     with pytest.raises(slamd.SlamdError):
         slamd.Frontend(daemon.namespace, dimension=5)
+    # a message not sent is never acknowledged; one sent to a daemon that
+    # is gone waits out the silence bound only
+    assert not frontend.wait_acknowledged(frontend.add_keyframe(8) + 1, timeout=30.0)
+    daemon.shut_down()
+    sequence = frontend.add_keyframe(9)
+    started = time.monotonic()
+    assert not frontend.wait_acknowledged(sequence, timeout=1.0)
+    assert time.monotonic() - started < 5.0
