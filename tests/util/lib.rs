@@ -98,20 +98,6 @@ pub fn max_pose_error(a: &[Pose2], b: &[Pose2]) -> f64 {
         .fold(0.0, f64::max)
 }
 
-/// [`max_pose_error`] with positions relative to the extent of `truth`
-/// (at least 1 m) and headings absolute: the scale-free measure of "to
-/// 1e-9" for a problem that has no length scale of its own.
-pub fn relative_pose_error(a: &[Pose2], truth: &[Pose2]) -> f64 {
-    let extent = truth.iter().map(|p| p.x.abs().max(p.y.abs())).fold(1.0, f64::max);
-    a.iter()
-        .zip(truth)
-        .map(|(p, q)| {
-            let dt = slamd::geometry::wrap_angle(p.theta - q.theta).abs();
-            ((p.x - q.x).abs().max((p.y - q.y).abs()) / extent).max(dt)
-        })
-        .fold(0.0, f64::max)
-}
-
 /// A directory path under the system's temporary directory named for the
 /// test and this process, removed if a run before left it.
 pub fn fresh_dir(name: &str) -> PathBuf {

@@ -1,6 +1,5 @@
 //! [`EngineConfig`]: the engine's tuning and its defaults.
 
-use super::SnapshotSource;
 use crate::gps::GpsConfig;
 use crate::nonlinear::LevenbergMarquardtParams;
 use crate::outliers::OutlierConfig;
@@ -51,11 +50,6 @@ pub struct EngineConfig {
     /// odometry then walks a short path, but every loop closure's path
     /// crosses them. Default 8.
     pub recent_last: usize,
-    /// What the published estimate is between re-solves.
-    pub snapshot: SnapshotSource,
-    /// Keep the exact two-stage linear solution even when it is not the
-    /// snapshot source.
-    pub linear_stages: bool,
     /// The polish of each re-solve.
     pub polish: LevenbergMarquardtParams,
     /// The outlier filter of loop closures.
@@ -77,8 +71,6 @@ impl Default for EngineConfig {
             nonlinear_ratio: 1.5,
             relinearise_ratio: 1.2,
             recent_last: 8,
-            snapshot: SnapshotSource::default(),
-            linear_stages: false,
             polish: LevenbergMarquardtParams::default(),
             outliers: OutlierConfig::default(),
             gps: GpsConfig::default(),

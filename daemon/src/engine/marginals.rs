@@ -52,13 +52,7 @@ impl<P: EnginePose> Engine<P> {
             }
             slots.push(k);
         }
-        let Some(gn) = self.state.gauss_newton() else {
-            return Err(EngineError::NoCovariance(
-                ids[0],
-                "marginals need the Gauss–Newton system (engine.snapshot = \"gauss-newton\")",
-            ));
-        };
-        match gn.covariance(&slots) {
+        match self.state.gauss_newton().covariance(&slots) {
             Ok(Some(sigma)) => Ok(sigma),
             Ok(None) => Err(EngineError::NoCovariance(
                 ids[0],

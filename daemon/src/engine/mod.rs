@@ -1,26 +1,21 @@
 //! The incremental engine: keyframes and edges in, a fresh estimate out
 //! after every update.
 //!
-//! [`Engine`] keeps two incremental systems over the keyframes seen so far:
-//!
-//! - the Gauss–Newton normal equations linearised at the last polished map
-//!   ([`gauss_newton`]): its solution is the published estimate, one
-//!   Gauss–Newton step from the polish over every edge since;
-//! - optionally, the two-stage linear system ([`linear_stages`]), exact at
-//!   every step.
-//!
-//! Both live in [`DynamicLdlt`](crate::sparse::dynamic::DynamicLdlt)
-//! factors: a new keyframe appends columns, a new edge or a reweight is a
-//! low-rank update. Every `resolve_every_edges` edges, or when the factor
+//! [`Engine`] keeps the Gauss–Newton normal equations over the keyframes
+//! seen so far, linearised at the last polished map ([`gauss_newton`]): its
+//! solution is the published estimate, one Gauss–Newton step from the
+//! polish over every edge since. They live in a
+//! [`DynamicLdlt`](crate::sparse::dynamic::DynamicLdlt) factor: a new
+//! keyframe appends columns, a new edge or a reweight is a low-rank
+//! update. Every `resolve_every_edges` edges, or when the factor
 //! has filled in past `resolve_fill_ratio`, a re-solve (module `resolve`) runs
 //! on another thread: Levenberg–Marquardt polish, a fresh ordering with the
 //! newest keyframes last, a refactorisation; it then replays what arrived
 //! meanwhile and swaps in without stopping ingestion.
 //!
-//! The parts: `State` (the model, its solvers and the
+//! The parts: `State` (the model, its Gauss–Newton system and the
 //! estimate, and how one [`Op`] applies), `Model` with its per-edge
-//! `EdgeState`, `Solvers` (the one seam between the Gauss–Newton and the
-//! two-stage systems), `Chi2Cache`, `ArrivalGate` (the switch a new loop
+//! `EdgeState`, `Chi2Cache`, `ArrivalGate` (the switch a new loop
 //! closure enters with), `rebuild` (polish and fresh factor), `Schedule`
 //! (when a re-solve or refresh is due), `Background` (the job on its
 //! thread and the ops it has yet to catch up with), `swap` (how a fresh
@@ -60,7 +55,6 @@ mod config;
 mod error;
 pub mod gauss_newton;
 pub mod judge;
-pub mod linear_stages;
 mod marginals;
 mod model;
 mod op;
@@ -71,14 +65,13 @@ mod resolve;
 mod restore;
 mod schedule;
 mod snapshot;
-mod solvers;
 mod state;
 mod swap;
 
 pub use config::EngineConfig;
 pub use error::EngineError;
 pub use marginals::upper_triangle;
-pub use op::{Op, SnapshotSource};
+pub use op::Op;
 pub use pose::EnginePose;
 pub use report::{EngineStats, FactorWork, UpdateReport};
 pub use slamd_types::{EdgeInput, FixInput};
@@ -157,8 +150,6 @@ impl<P: EnginePose> Engine<P> {
             tracing::warn!(%reason, "Turned off.");
             config.outliers.cycles = false;
             config.outliers.pairwise = false;
-            config.linear_stages = false;
-            config.snapshot = SnapshotSource::GaussNewton;
         }
         Self {
             state: State::new(&config),
@@ -437,10 +428,8 @@ impl<P: EnginePose> Engine<P> {
     /// Whether the estimate's χ² is above `ratio` times its linear
     /// model's plus `slack` (never for a ratio of 0).
     fn beyond(&self, ratio: f64, slack: f64) -> bool {
-        match self.state.predicted_chi2() {
-            Some(predicted) => ratio > 0.0 && self.state.chi2() > ratio * predicted.max(0.0) + slack,
-            None => false,
-        }
+        let predicted = self.state.predicted_chi2();
+        ratio > 0.0 && self.state.chi2() > ratio * predicted.max(0.0) + slack
     }
 
     /// Past `relinearise_ratio`: relinearises inline (a running
@@ -481,14 +470,6 @@ impl<P: EnginePose> Engine<P> {
         self.submit(Op::Gps(GpsFix::at(&fix, &position, k, &frame)))?;
         self.fixes.push(fix);
         Ok(())
-    }
-}
-
-impl Engine {
-    /// The exact two-stage linear solution of everything so far (needs
-    /// `linear_stages`), indexed like the keyframes.
-    pub fn linear_solution(&mut self) -> Option<Vec<Pose2>> {
-        self.state.linear_solution()
     }
 }
 

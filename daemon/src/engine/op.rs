@@ -1,6 +1,5 @@
-//! [`Op`]: one change as the engine received it, and the two choices that
-//! shape a [`State`](super::state::State): how a rebuild polishes
-//! ([`Polish`]) and where snapshots come from ([`SnapshotSource`]).
+//! [`Op`]: one change as the engine received it, and how a rebuild of a
+//! [`State`](super::state::State) polishes ([`Polish`]).
 
 use super::pose::EnginePose;
 use super::EdgeInput;
@@ -63,21 +62,4 @@ pub enum Polish {
     Inline,
     /// None: refactorise at the estimate.
     None,
-}
-
-/// Where the published estimate comes from between re-solves.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum SnapshotSource {
-    /// One Gauss–Newton step from the last polish (iSAM's scheme); the
-    /// default (docs/design.md, "The incremental engine").
-    #[default]
-    GaussNewton,
-    /// The exact two-stage solution, carried by each keyframe's correction
-    /// to the last polish: `S_k = O_k ∘ L_k` with `O_k = X*_k ∘ L0_k⁻¹`.
-    /// Selectable, not the default: its snapshots stray further from their
-    /// prefix's optimum and it is no faster, since a loop closure's axis
-    /// correction rewrites the position rows of the whole loop
-    /// (docs/benchmarks.md, "Measured and not kept").
-    Linear,
 }

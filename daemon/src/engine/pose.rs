@@ -4,12 +4,11 @@
 //! Each item is either the same math written for one dimension (the
 //! whitened rows of an edge, its innovation test, the linear initialiser a
 //! re-solve starts from) or a feature only the plane has so far (the
-//! two-stage incremental system, the cycle test and PCM), which the
+//! cycle test and PCM), which the
 //! spatial pose declines: [`EnginePose::check`] names them and
 //! [`Engine::create`](super::Engine::create) turns them off with a
 //! warning, so they are never asked for.
 
-use super::linear_stages::LinearStages;
 use super::EngineConfig;
 use crate::geometry::{Pose2, Turns};
 use crate::gps::GpsPose;
@@ -18,8 +17,6 @@ use crate::linear::{chordal, two_stage};
 use crate::nonlinear::{se2, se3, LiePose, PositionPrior};
 use crate::outliers::consistency::ConsistencyGraph;
 use crate::outliers::{cycles, OutlierConfig};
-use crate::sparse::dynamic::UpdateError;
-use crate::sparse::FactorError;
 use nalgebra::{Matrix3, Matrix6, SMatrix, Vector2, Vector3, Vector6};
 use std::ops::Index;
 use std::sync::Mutex;
@@ -32,8 +29,6 @@ pub trait EnginePose: LiePose + GpsPose {
     type Tails: Index<usize, Output = f64>;
     /// `J`, `DOF × 2·DOF`.
     type Jacobian: Index<(usize, usize), Output = f64>;
-    /// The incremental two-stage system, where the dimension has one.
-    type Stages: Stages<Self>;
 
     /// The edge's whitened rows and tails at `xi`, `xj`: its terms in the
     /// normal equations are `Σ_r [rows_r | tail_r]ᵀ [rows_r | tail_r]`.
@@ -89,86 +84,6 @@ pub trait EnginePose: LiePose + GpsPose {
     fn check(config: &EngineConfig) -> Result<(), String>;
 }
 
-/// The incremental two-stage system of one dimension (see
-/// [`LinearStages`]).
-pub trait Stages<P: EnginePose>: Clone + std::fmt::Debug + Send + Sync + Sized + 'static {
-    /// An empty system, where the dimension has one.
-    fn create() -> Option<Self>;
-    /// A fresh factorisation over `edges` (index, weight) in `order`.
-    fn build(graph: &PoseGraph<P>, edges: &[(usize, f64)], order: &[usize]) -> Result<Self, FactorError>;
-    /// Keyframe `k` joins.
-    fn add_keyframe(&mut self, k: usize);
-    /// Adds `delta` times edge `index`'s rows.
-    fn apply_edge(&mut self, index: usize, edge: &Edge<P>, delta: f64) -> Result<(), UpdateError>;
-    /// The exact solution of everything so far.
-    fn solve_exact(&mut self, graph: &PoseGraph<P>) -> Vec<P>;
-    /// Solves, returning the keyframes whose pose moved past `threshold`.
-    fn solve(&mut self, graph: &PoseGraph<P>, threshold: f64) -> &[usize];
-    /// Stored entries of the factors.
-    fn factor_nnz(&self) -> usize;
-    /// Keyframe `k`'s pose.
-    fn pose(&self, k: usize) -> P;
-}
-
-impl Stages<Pose2> for LinearStages {
-    fn create() -> Option<Self> {
-        Some(LinearStages::new())
-    }
-    fn build(graph: &PoseGraph, edges: &[(usize, f64)], order: &[usize]) -> Result<Self, FactorError> {
-        LinearStages::build(graph, edges, order)
-    }
-    fn add_keyframe(&mut self, k: usize) {
-        LinearStages::add_keyframe(self, k)
-    }
-    fn apply_edge(&mut self, index: usize, edge: &Edge, delta: f64) -> Result<(), UpdateError> {
-        LinearStages::apply_edge(self, index, edge, delta)
-    }
-    fn solve_exact(&mut self, graph: &PoseGraph) -> Vec<Pose2> {
-        LinearStages::solve_exact(self, graph)
-    }
-    fn solve(&mut self, graph: &PoseGraph, threshold: f64) -> &[usize] {
-        LinearStages::solve(self, graph, threshold)
-    }
-    fn factor_nnz(&self) -> usize {
-        LinearStages::factor_nnz(self)
-    }
-    fn pose(&self, k: usize) -> Pose2 {
-        LinearStages::pose(self, k)
-    }
-}
-
-/// No incremental two-stage system: a type with no values, so the engine
-/// can never hold one.
-#[derive(Clone, Copy, Debug)]
-pub enum NoStages {}
-
-impl<P: EnginePose> Stages<P> for NoStages {
-    fn create() -> Option<Self> {
-        None
-    }
-    fn build(_: &PoseGraph<P>, _: &[(usize, f64)], _: &[usize]) -> Result<Self, FactorError> {
-        Err(FactorError::NotPositiveDefinite { step: 0 })
-    }
-    fn add_keyframe(&mut self, _: usize) {
-        match *self {}
-    }
-    fn apply_edge(&mut self, _: usize, _: &Edge<P>, _: f64) -> Result<(), UpdateError> {
-        match *self {}
-    }
-    fn solve_exact(&mut self, _: &PoseGraph<P>) -> Vec<P> {
-        match *self {}
-    }
-    fn solve(&mut self, _: &PoseGraph<P>, _: f64) -> &[usize] {
-        match *self {}
-    }
-    fn factor_nnz(&self) -> usize {
-        match *self {}
-    }
-    fn pose(&self, _: usize) -> P {
-        match *self {}
-    }
-}
-
 /// A square root `L` of an information matrix, `Ω = L Lᵀ` (Cholesky; the
 /// square roots of the diagonal for one that is not positive definite,
 /// which the graph refuses at its door).
@@ -186,7 +101,6 @@ impl EnginePose for Pose2 {
     type Rows = SMatrix<f64, 3, 6>;
     type Tails = Vector3<f64>;
     type Jacobian = SMatrix<f64, 3, 6>;
-    type Stages = LinearStages;
 
     fn whitened(edge: &Edge, xi: &Pose2, xj: &Pose2) -> (Self::Rows, Vector3<f64>) {
         let (j, e) = se2::jacobian(edge, xi, xj);
@@ -275,7 +189,6 @@ impl EnginePose for Pose3 {
     type Rows = SMatrix<f64, 6, 12>;
     type Tails = Vector6<f64>;
     type Jacobian = SMatrix<f64, 6, 12>;
-    type Stages = NoStages;
 
     fn whitened(edge: &Edge<Pose3>, xi: &Pose3, xj: &Pose3) -> (Self::Rows, Vector6<f64>) {
         let (j, e) = se3::jacobian(edge, xi, xj);
@@ -339,9 +252,6 @@ impl EnginePose for Pose3 {
         let o = &config.outliers;
         if o.enabled && (o.cycles || o.pairwise) {
             return Err("the cycle test and PCM (outliers.cycles, outliers.pairwise) are planar; turn them off for 3-D graphs".into());
-        }
-        if config.linear_stages || config.snapshot != super::SnapshotSource::GaussNewton {
-            return Err("the incremental two-stage system (linear_stages, snapshot = \"linear\") is planar; 3-D graphs use Gauss–Newton".into());
         }
         Ok(())
     }

@@ -3,10 +3,10 @@
 //! together are [`rebuild`]. A background re-solve runs the two halves on
 //! its own thread, the foreground runs [`rebuild`] inline.
 
+use super::gauss_newton::GaussNewton;
 use super::model::Model;
 use super::op::Polish;
 use super::pose::EnginePose;
-use super::solvers::Solvers;
 use super::state::State;
 use super::EngineConfig;
 use crate::sparse::ordering::amd_newest_last;
@@ -87,9 +87,8 @@ pub fn factorise<P: EnginePose>(
     });
     let perm = amd_newest_last(joined.len().saturating_sub(1), pairs, recent);
     let order: Vec<usize> = perm.iter().map(|&c| joined[c + 1]).collect();
-    let (solvers, estimate) =
-        Solvers::build(config, &model.graph, &model.joined, &active, &priors, lin, &order)?;
-    Ok(State::assemble(config, model, solvers, estimate))
+    let gn = GaussNewton::build(&model.graph, &active, &priors, lin, &order)?;
+    Ok(State::assemble(config, model, gn))
 }
 
 #[cfg(test)]

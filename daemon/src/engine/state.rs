@@ -1,4 +1,5 @@
-//! [`State`]: the [`Model`] with its solvers, and how one change applies.
+//! [`State`]: the [`Model`] with its Gauss–Newton system, and how one
+//! change applies.
 //!
 //! The foreground engine and a background re-solve hold a `State` each and
 //! apply the same [`Op`]s to it, so the re-solved state can catch up with
@@ -6,11 +7,11 @@
 
 use super::arrival::{ArrivalGate, Verdict};
 use super::chi2::Chi2Cache;
+use super::gauss_newton::GaussNewton;
 pub use super::model::{EdgeState, Model};
 pub use super::op::{Op, Polish};
 use super::pose::EnginePose;
 use super::report::FactorWork;
-use super::solvers::Solvers;
 use super::{EngineConfig, EngineError};
 use crate::geometry::Pose2;
 use crate::gps::Georef;
@@ -18,12 +19,12 @@ use crate::graph::{Edge, EdgeKind, KeyframeId};
 use crate::outliers::OFF_BELOW;
 use crate::sparse::FactorError;
 
-/// The model, its solvers, the estimate and its cached χ².
+/// The model, its Gauss–Newton system, the estimate and its cached χ².
 #[derive(Clone, Debug)]
 pub struct State<P: EnginePose = Pose2> {
     /// Graph and bookkeeping.
     pub model: Model<P>,
-    solvers: Solvers<P>,
+    gn: GaussNewton<P>,
     estimate: Vec<P>,
     chi2: Chi2Cache,
     /// The keyframes the last solve moved (a buffer kept between solves).
@@ -35,28 +36,25 @@ pub struct State<P: EnginePose = Pose2> {
 }
 
 impl<P: EnginePose> State<P> {
-    /// The Gauss–Newton system, when kept.
-    pub(super) fn gauss_newton(&mut self) -> Option<&mut super::gauss_newton::GaussNewton<P>> {
-        self.solvers.gauss_newton()
+    /// The Gauss–Newton system.
+    pub(super) fn gauss_newton(&mut self) -> &mut GaussNewton<P> {
+        &mut self.gn
     }
 
-    /// An empty state with the solvers `config` selects.
+    /// An empty state.
     pub fn new(config: &EngineConfig) -> Self {
-        Self::assemble(config, Model::default(), Solvers::new(config), Vec::new())
+        Self::assemble(config, Model::default(), GaussNewton::new(P::IDENTITY))
     }
 
-    /// A state over `model` with these solvers and estimate; the
-    /// bookkeeping starts fresh and the cached χ² is computed.
-    pub(super) fn assemble(
-        config: &EngineConfig,
-        model: Model<P>,
-        solvers: Solvers<P>,
-        estimate: Vec<P>,
-    ) -> Self {
+    /// A state over `model` with this Gauss–Newton system, whose estimate
+    /// it takes; the bookkeeping starts fresh and the cached χ² is
+    /// computed.
+    pub(super) fn assemble(config: &EngineConfig, model: Model<P>, gn: GaussNewton<P>) -> Self {
+        let estimate = gn.estimate().to_vec();
         Self {
             chi2: Chi2Cache::new(&model, &estimate),
             model,
-            solvers,
+            gn,
             estimate,
             moved: Vec::new(),
             gate: ArrivalGate::new(config.outliers),
@@ -143,8 +141,9 @@ impl<P: EnginePose> State<P> {
                 self.model.incident.push(Vec::new());
                 let gauge = guess.unwrap_or(P::IDENTITY);
                 self.estimate.push(gauge);
-                self.solvers.push_keyframe(k, gauge);
                 if k == 0 {
+                    // keyframe 0 fixes the gauge where it is
+                    self.gn = GaussNewton::new(gauge);
                     self.model.joined[0] = true;
                 }
                 Ok(())
@@ -183,16 +182,13 @@ impl<P: EnginePose> State<P> {
         if self.model.georef.is_none() {
             return Ok(());
         }
-        if !self.solvers.has_gauss_newton() {
-            return Ok(());
-        }
         for f in 0..self.model.fixes.len() {
             if self.model.fix_applied[f] || !self.model.joined[self.model.fixes[f].keyframe] {
                 continue;
             }
             let prior = self.model.prior(f).expect("georeferenced");
             self.model.fix_applied[f] = true;
-            self.solvers.apply_prior(&prior).map_err(EngineError::Numeric)?;
+            self.gn.apply_prior(&prior).map_err(EngineError::Numeric)?;
         }
         Ok(())
     }
@@ -353,7 +349,7 @@ impl<P: EnginePose> State<P> {
                     };
                     let guess = (hinted.or(self.model.graph.keyframes()[k].guess))
                         .unwrap_or_else(|| self.estimate[m].compose(&rel));
-                    self.join(k, m, guess);
+                    self.join(k, guess);
                     queue.extend(self.model.waiting.remove(&k).unwrap_or_default());
                 }
             }
@@ -400,10 +396,7 @@ impl<P: EnginePose> State<P> {
         let e = P::edge_error(edge, &self.estimate[edge.from], &self.estimate[edge.to]);
         let factor = self.variance_factor();
         let phi = self.gate.phi();
-        let Some(gn) = self.solvers.gauss_newton() else {
-            return Ok(false);
-        };
-        let innovation = gn
+        let innovation = (self.gn)
             .innovation_chi2(edge, &e, factor)
             .map_err(EngineError::Numeric)?;
         Ok(innovation.is_some_and(|chi2| chi2 <= phi))
@@ -442,19 +435,17 @@ impl<P: EnginePose> State<P> {
         }
     }
 
-    /// Keyframe `k` joins through an edge from `anchor`, at `guess`.
-    fn join(&mut self, k: usize, anchor: usize, guess: P) {
+    /// Keyframe `k` joins the map at `guess`.
+    fn join(&mut self, k: usize, guess: P) {
         self.model.joined[k] = true;
         self.estimate[k] = guess;
-        self.solvers.join(k, anchor, guess);
+        self.gn.add_keyframe(k, guess);
     }
 
-    /// Adds `delta` times edge `e`'s terms to every solver.
+    /// Adds `delta` times edge `e`'s terms to the Gauss–Newton system.
     fn contribute(&mut self, e: usize, delta: f64) -> Result<(), EngineError> {
         let edge = self.model.graph.edges()[e];
-        self.solvers
-            .apply_edge(e, &edge, delta)
-            .map_err(EngineError::Numeric)
+        self.gn.apply_edge(&edge, delta).map_err(EngineError::Numeric)
     }
 
     /// Recomputes one edge's cached χ² at the current estimate.
@@ -471,10 +462,17 @@ impl<P: EnginePose> State<P> {
         // consolidate its free lists every keyframe
         let mut changed = std::mem::take(&mut self.moved);
         changed.clear();
-        let solved = (self.solvers)
-            .solve(&self.model.graph, threshold, &mut changed, &mut self.estimate)
-            .map_err(EngineError::Numeric);
+        let solved = match self.gn.solve(threshold) {
+            Ok(moved) => {
+                changed.extend_from_slice(moved);
+                Ok(())
+            }
+            Err(e) => Err(EngineError::Numeric(e)),
+        };
         if solved.is_ok() {
+            for &k in &changed {
+                self.estimate[k] = self.gn.estimate()[k];
+            }
             self.chi2.refresh_moved(&self.model, &changed, &self.estimate);
         }
         let moved = changed.len();
@@ -512,34 +510,31 @@ impl<P: EnginePose> State<P> {
         &self.estimate
     }
 
-    /// Where the estimate is linearised: the Gauss–Newton system's point,
-    /// else (the linear source) the estimate itself. Indexed like the
-    /// keyframes, but it may end at the newest joined one: a newer
-    /// keyframe no edge has connected yet has no linearisation point.
+    /// Where the estimate is linearised: the Gauss–Newton system's point.
+    /// Indexed like the keyframes, but it may end at the newest joined
+    /// one: a newer keyframe no edge has connected yet has no
+    /// linearisation point.
     pub fn linearisation(&self) -> &[P] {
-        self.solvers.linearisation().unwrap_or(&self.estimate)
+        self.gn.linearisation()
     }
 
-    /// χ² the Gauss–Newton model predicts for the current estimate, when
-    /// that is the source.
-    pub fn predicted_chi2(&self) -> Option<f64> {
-        self.solvers.predicted_chi2()
+    /// χ² the Gauss–Newton model predicts for the current estimate.
+    pub fn predicted_chi2(&self) -> f64 {
+        self.gn.predicted_chi2()
     }
 
     /// What the Gauss–Newton factor's update walks and back-substitutions
-    /// have swept so far (zero without one).
+    /// have swept so far.
     pub fn work(&self) -> FactorWork {
-        self.solvers.work()
+        FactorWork {
+            walked: self.gn.factor().walk_stats().entries,
+            solved: self.gn.solve_stats().entries,
+        }
     }
 
     /// Stored entries of the factor behind the published estimate.
     pub fn factor_nnz(&self) -> usize {
-        self.solvers.factor_nnz()
-    }
-
-    /// The exact two-stage solution, when kept.
-    pub fn linear_solution(&mut self) -> Option<Vec<P>> {
-        self.solvers.linear_solution(&self.model.graph)
+        self.gn.factor_nnz()
     }
 
     /// A copy of the model, for a rebuild elsewhere.
