@@ -10,6 +10,7 @@
 use super::{se2, se3};
 use crate::geometry::Pose2;
 use crate::graph::{Edge, EdgeCost, Pose3};
+use crate::robust::Kernel;
 use faer::c64;
 use nalgebra::{Matrix2, Matrix3, Matrix6, SMatrix, SVector, Vector2, Vector3, Vector6};
 use std::ops::{Index, MulAssign};
@@ -55,6 +56,18 @@ pub trait LiePose: EdgeCost {
     /// Paper B's `χ′ |Λ|`: the squared Euclidean error of `edge` times the
     /// determinant of its covariance (the adaptive switch's scale).
     fn asc_scale(edge: &Edge<Self>, xi: &Self, xj: &Self) -> f64;
+
+    /// `kernel`'s switch of `edge` at poses `xi`, `xj`.
+    fn kernel_switch(kernel: &Kernel, edge: &Edge<Self>, xi: &Self, xj: &Self) -> f64 {
+        let chi2 = Self::mahalanobis(&edge.information, &Self::edge_error(edge, xi, xj));
+        kernel.switch(chi2, || Self::asc_scale(edge, xi, xj))
+    }
+
+    /// `kernel`'s robust cost of `edge` at poses `xi`, `xj`.
+    fn kernel_cost(kernel: &Kernel, edge: &Edge<Self>, xi: &Self, xj: &Self) -> f64 {
+        let chi2 = Self::mahalanobis(&edge.information, &Self::edge_error(edge, xi, xj));
+        kernel.cost(chi2, || Self::asc_scale(edge, xi, xj))
+    }
 }
 
 impl LiePose for Pose2 {
@@ -147,5 +160,30 @@ impl LiePose for Pose3 {
         let e = crate::graph::edge_error3(edge, xi, xj);
         let euclid: f64 = e.iter().map(|v| v * v).sum();
         euclid * edge.information.covariance().determinant()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::graph::{EdgeKind, Information};
+
+    #[test]
+    fn a_kernel_scores_an_edge_by_its_chi2_and_asc_by_its_scale() {
+        // error (0, 2, 0) under Ω = diag(1, 2, 4): χ² = 2·4 = 8; paper B's
+        // χ′ = 4 and |Λ| = det diag(1, 1/2, 1/4) = 1/8
+        let edge = Edge {
+            from: 0,
+            to: 1,
+            measurement: Pose2::new(1.0, 0.0, 0.0),
+            information: Information::from_upper([1.0, 0.0, 0.0, 2.0, 0.0, 4.0]).unwrap(),
+            kind: EdgeKind::LoopClosure,
+        };
+        let (a, b) = (Pose2::IDENTITY, Pose2::new(1.0, 2.0, 0.0));
+        let dcs = Kernel::Dcs { phi: 1.0 };
+        assert!((Pose2::kernel_switch(&dcs, &edge, &a, &b) - 2.0 / 9.0).abs() < 1e-15);
+        assert!((Pose2::kernel_cost(&dcs, &edge, &a, &b) - 23.0 / 9.0).abs() < 1e-15);
+        // s = 1/(8·4/8 + 1) = 1/5
+        assert!((Pose2::kernel_switch(&Kernel::Asc, &edge, &a, &b) - 0.2).abs() < 1e-15);
     }
 }

@@ -84,7 +84,7 @@ impl<'a, P: LiePose> Problem<'a, P> {
             .map(|(e, &sw)| {
                 let (xi, xj) = (&poses[e.from], &poses[e.to]);
                 if sw {
-                    r.kernel.cost(e, xi, xj)
+                    P::kernel_cost(&r.kernel, e, xi, xj)
                 } else {
                     edge_chi2(e, poses)
                 }
@@ -101,7 +101,7 @@ impl<'a, P: LiePose> Problem<'a, P> {
             (self.edges.iter().zip(r.switchable))
                 .map(|(e, &sw)| {
                     if sw {
-                        r.kernel.switch(e, &poses[e.from], &poses[e.to]).powi(2)
+                        P::kernel_switch(&r.kernel, e, &poses[e.from], &poses[e.to]).powi(2)
                     } else {
                         1.0
                     }

@@ -126,7 +126,7 @@ fn wake<P: LiePose>(edges: &[Edge<P>], robust: &Robust<'_>, poses: &[P], awake: 
     for (a, e) in edges.iter().enumerate() {
         if !awake[a]
             && (!robust.switchable[a]
-                || robust.kernel.switch(e, &poses[e.from], &poses[e.to]) >= DORMANT_BELOW)
+                || P::kernel_switch(&robust.kernel, e, &poses[e.from], &poses[e.to]) >= DORMANT_BELOW)
         {
             awake[a] = true;
             woke += 1;
@@ -186,7 +186,7 @@ pub fn robust_polish<P: LiePose>(
                 0.0
             } else if switchable[a] && config.enabled {
                 let e = &edges[a];
-                config.kernel.switch(e, &poses[e.from], &poses[e.to])
+                P::kernel_switch(&config.kernel, e, &poses[e.from], &poses[e.to])
             } else {
                 1.0
             }
@@ -262,7 +262,7 @@ pub(super) mod tests {
                 switchable: &switchable,
             },
         );
-        assert!(config.kernel.switch(closure, &start[7], &start[0]) < DORMANT_BELOW);
+        assert!(Pose2::kernel_switch(&config.kernel, closure, &start[7], &start[0]) < DORMANT_BELOW);
         let params = LevenbergMarquardtParams::default();
         let got = robust_polish(
             RobustEdges {

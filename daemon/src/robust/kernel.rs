@@ -9,9 +9,6 @@
 //! whose derivative is `s²`, which is what the polish compares when it
 //! accepts a step.
 
-use crate::graph::Edge;
-use crate::nonlinear::lie::LiePose;
-
 /// How a loop closure's switch follows its error.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
@@ -78,27 +75,27 @@ impl Kernel {
         }
     }
 
-    /// The switch `s ∈ [0, 1]` of `edge` at poses `xi`, `xj`.
-    pub fn switch<P: LiePose>(&self, edge: &Edge<P>, xi: &P, xj: &P) -> f64 {
-        let e = P::edge_error(edge, xi, xj);
-        let chi2 = P::mahalanobis(&edge.information, &e);
+    /// The switch `s ∈ [0, 1]` of an edge whose error has `χ² = eᵀ Ω e`;
+    /// `asc` gives paper B's `χ′ |Λ|` of the edge (the squared Euclidean
+    /// error times the determinant of its covariance), asked only by
+    /// [`Kernel::Asc`].
+    pub fn switch(&self, chi2: f64, asc: impl FnOnce() -> f64) -> f64 {
         match *self {
             Kernel::Sc { xi } => sc(chi2, xi),
             Kernel::Dcs { phi } => dcs(chi2, phi),
-            Kernel::Asc => 1.0 / (chi2 * P::asc_scale(edge, xi, xj) + 1.0),
+            Kernel::Asc => 1.0 / (chi2 * asc() + 1.0),
         }
     }
 
-    /// The robust cost `ρ` of `edge` at poses `xi`, `xj`.
-    pub fn cost<P: LiePose>(&self, edge: &Edge<P>, xi: &P, xj: &P) -> f64 {
-        let e = P::edge_error(edge, xi, xj);
-        let chi2 = P::mahalanobis(&edge.information, &e);
+    /// The robust cost `ρ(χ²)` of an edge whose error has `χ² = eᵀ Ω e`;
+    /// `asc` as for [`Self::switch`].
+    pub fn cost(&self, chi2: f64, asc: impl FnOnce() -> f64) -> f64 {
         match *self {
             Kernel::Sc { xi } => xi * chi2 / (xi + chi2),
             Kernel::Dcs { phi } if chi2 <= phi => chi2,
             Kernel::Dcs { phi } => phi * (3.0 * chi2 - phi) / (phi + chi2),
             Kernel::Asc => {
-                let w = 1.0 / P::asc_scale(edge, xi, xj).max(f64::MIN_POSITIVE);
+                let w = 1.0 / asc().max(f64::MIN_POSITIVE);
                 w * chi2 / (w + chi2)
             }
         }
@@ -118,34 +115,25 @@ pub fn dcs(chi2: f64, phi: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::geometry::Pose2;
-    use crate::graph::{EdgeKind, Information};
 
-    fn edge(info: Information) -> Edge {
-        Edge {
-            from: 0,
-            to: 1,
-            measurement: Pose2::new(1.0, 0.0, 0.0),
-            information: info,
-            kind: EdgeKind::LoopClosure,
-        }
+    /// No χ′ |Λ|: the kernels other than ASC never ask.
+    fn unasked() -> f64 {
+        unreachable!("only ASC asks for χ′ |Λ|")
     }
 
     #[test]
     fn closed_forms_match_hand_computed_values() {
-        // error (0, 2, 0) under Ω = diag(1, 2, 4): χ² = 2·4 = 8
-        let e = edge(Information::from_upper([1.0, 0.0, 0.0, 2.0, 0.0, 4.0]).unwrap());
-        let (a, b) = (Pose2::IDENTITY, Pose2::new(1.0, 2.0, 0.0));
-        assert!((Kernel::Sc { xi: 1.0 }.switch(&e, &a, &b) - 1.0 / 9.0).abs() < 1e-15);
-        assert!((Kernel::Sc { xi: 1.0 }.cost(&e, &a, &b) - 8.0 / 9.0).abs() < 1e-15);
-        assert!((Kernel::Dcs { phi: 1.0 }.switch(&e, &a, &b) - 2.0 / 9.0).abs() < 1e-15);
-        assert!((Kernel::Dcs { phi: 1.0 }.cost(&e, &a, &b) - 23.0 / 9.0).abs() < 1e-15);
-        // ASC: χ′ = 4, |Λ| = det diag(1, 1/2, 1/4) = 1/8: s = 1/(8·4/8 + 1) = 1/5
-        assert!((Kernel::Asc.switch(&e, &a, &b) - 0.2).abs() < 1e-15);
-        // below Φ, DCS leaves the edge alone
-        let near = Pose2::new(1.0, 0.1, 0.0);
-        assert_eq!(Kernel::Dcs { phi: 1.0 }.switch(&e, &a, &near), 1.0);
-        assert!((Kernel::Dcs { phi: 1.0 }.cost(&e, &a, &near) - 0.02).abs() < 1e-15);
+        // χ² = 8 (the error (0, 2, 0) under Ω = diag(1, 2, 4))
+        assert!((Kernel::Sc { xi: 1.0 }.switch(8.0, unasked) - 1.0 / 9.0).abs() < 1e-15);
+        assert!((Kernel::Sc { xi: 1.0 }.cost(8.0, unasked) - 8.0 / 9.0).abs() < 1e-15);
+        assert!((Kernel::Dcs { phi: 1.0 }.switch(8.0, unasked) - 2.0 / 9.0).abs() < 1e-15);
+        assert!((Kernel::Dcs { phi: 1.0 }.cost(8.0, unasked) - 23.0 / 9.0).abs() < 1e-15);
+        // ASC with χ′ |Λ| = 1/2: s = 1/(8·1/2 + 1) = 1/5, ρ = 2·8/(2 + 8)
+        assert!((Kernel::Asc.switch(8.0, || 0.5) - 0.2).abs() < 1e-15);
+        assert!((Kernel::Asc.cost(8.0, || 0.5) - 1.6).abs() < 1e-15);
+        // below Φ, DCS leaves the edge alone (the error (0, 0.1, 0): χ² 0.02)
+        assert_eq!(Kernel::Dcs { phi: 1.0 }.switch(0.02, unasked), 1.0);
+        assert!((Kernel::Dcs { phi: 1.0 }.cost(0.02, unasked) - 0.02).abs() < 1e-15);
     }
 
     #[test]

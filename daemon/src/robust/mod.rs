@@ -6,6 +6,8 @@
 //! `w_e` taken at the current poses, is IRLS. The kernels here are the
 //! closed-form switches of switchable constraints, whose weight is the
 //! square of the switch: `w = s²` ([`Kernel::switch`], [`Kernel::cost`]).
+//! They take the χ² alone, so they sit below the solver: the polish asks
+//! them through [`LiePose::kernel_switch`](crate::nonlinear::LiePose::kernel_switch).
 //! The nonlinear polish weighs switchable edges by them; [`crate::outliers`]
 //! decides which edges are switchable and drives the polish.
 
