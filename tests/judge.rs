@@ -5,7 +5,7 @@
 
 use slamd::engine::{EdgeInput, Engine, EngineConfig};
 use slamd::geometry::Pose2;
-use slamd::graph::{Edge, EdgeKind, Information, PoseGraph};
+use slamd::graph::{EdgeKind, Information, PoseGraph};
 use slamd::outliers::REJECTED_BELOW;
 use slamd::synthetic::{generate, WorldParams};
 use std::collections::BTreeSet;
@@ -19,33 +19,7 @@ fn spoiled_world() -> (PoseGraph, usize) {
         seed: 5,
         ..WorldParams::default()
     });
-    let mut edges = world.graph.edges().to_vec();
-    let mut rng = 977u64;
-    let mut next = |m: u64| {
-        rng = rng
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        (rng >> 33) % m
-    };
-    let first = edges.len();
-    while edges.len() < first + 80 {
-        let (a, b) = (next(600) as usize, next(600) as usize);
-        if a.abs_diff(b) < 2 {
-            continue;
-        }
-        let m = Pose2::new(next(100) as f64 / 50.0, next(100) as f64 / 50.0, 0.3);
-        edges.push(Edge {
-            from: a.min(b),
-            to: a.max(b),
-            measurement: m,
-            information: Information::from_upper([42.7, 0.0, 0.0, 42.7, 0.0, 42.7]).unwrap(),
-            kind: EdgeKind::LoopClosure,
-        });
-    }
-    (
-        PoseGraph::from_parts(world.graph.keyframes().to_vec(), edges).unwrap(),
-        first,
-    )
+    slamd_tests::with_random_loop_closures(&world.graph, 80, 977, 50.0, 0.3)
 }
 
 /// Replays `g` keyframe by keyframe into an engine configured `config`,

@@ -40,31 +40,8 @@ fn random_wrong_loop_closures_are_switched_off_online() {
     let clean_ate = ate(&world.graph, &poses(&clean, 600), &truth).unwrap().rmse;
 
     // 60 Vertigo-style random loop closures: random ends, small measurement
-    let mut edges = world.graph.edges().to_vec();
-    let mut rng = 12345u64;
-    let mut next = |m: u64| {
-        rng = rng
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        (rng >> 33) % m
-    };
-    let first_injected = edges.len();
-    while edges.len() < first_injected + 60 {
-        let (a, b) = (next(600) as usize, next(600) as usize);
-        if a.abs_diff(b) < 2 {
-            continue;
-        }
-        let m = Pose2::new(next(100) as f64 / 300.0, next(100) as f64 / 300.0, 0.1);
-        let info = Information::from_upper([42.7, 0.0, 0.0, 42.7, 0.0, 42.7]).unwrap();
-        edges.push(slamd::graph::Edge {
-            from: a.min(b),
-            to: a.max(b),
-            measurement: m,
-            information: info,
-            kind: EdgeKind::LoopClosure,
-        });
-    }
-    let spoiled = PoseGraph::from_parts(world.graph.keyframes().to_vec(), edges).unwrap();
+    let (spoiled, first_injected) =
+        slamd_tests::with_random_loop_closures(&world.graph, 60, 12345, 300.0, 0.1);
     let (engine, sent) = replay(&spoiled, EngineConfig::default());
     let switches = engine.switches();
     let switched_off: BTreeSet<usize> = (sent.iter().enumerate())

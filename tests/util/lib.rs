@@ -76,6 +76,46 @@ pub fn noise_free(truth: &[Pose2], pairs: &[(usize, usize)]) -> PoseGraph {
     g
 }
 
+/// `graph` with `count` Vertigo-style random wrong loop closures appended,
+/// drawn from a seeded LCG in a fixed order: both ends uniform over the
+/// keyframes (at least 2 apart), the measurement `(u / scale, v / scale,
+/// theta)` with `u`, `v` uniform in 0..100, information 42.7·I (Vertigo's
+/// default). Returns the spoiled graph and the index of the first.
+pub fn with_random_loop_closures(
+    graph: &PoseGraph,
+    count: usize,
+    seed: u64,
+    scale: f64,
+    theta: f64,
+) -> (PoseGraph, usize) {
+    let n = graph.len() as u64;
+    let mut edges = graph.edges().to_vec();
+    let mut rng = seed;
+    let mut next = |m: u64| {
+        rng = rng
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (rng >> 33) % m
+    };
+    let first = edges.len();
+    while edges.len() < first + count {
+        let (a, b) = (next(n) as usize, next(n) as usize);
+        if a.abs_diff(b) < 2 {
+            continue;
+        }
+        let m = Pose2::new(next(100) as f64 / scale, next(100) as f64 / scale, theta);
+        edges.push(slamd::graph::Edge {
+            from: a.min(b),
+            to: a.max(b),
+            measurement: m,
+            information: Information::from_upper([42.7, 0.0, 0.0, 42.7, 0.0, 42.7]).unwrap(),
+            kind: EdgeKind::LoopClosure,
+        });
+    }
+    let spoiled = PoseGraph::from_parts(graph.keyframes().to_vec(), edges).unwrap();
+    (spoiled, first)
+}
+
 /// The poses of a walk from the origin (the gauge) by relative `steps`
 /// `(x, y, θ)`, each in the frame of the pose before.
 pub fn walk(steps: &[(f64, f64, f64)]) -> Vec<Pose2> {
