@@ -19,22 +19,14 @@ by `slamd eval` (ATE after the best rigid alignment). With --svg-dir,
 writes bicocca-THRESHOLD.svg there: the three maps over the aligned
 ground truth. The binary is target/release/slamd or $SLAMD_BIN.
 """
-import argparse, bisect, json, math, os, subprocess, sys, tempfile
+import argparse, bisect, math, os, sys, tempfile
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, HERE)
 from outliers import gnc  # noqa: E402
 from robustness_svg import align, panel, table  # noqa: E402
+from common import DATA, slamd
 
-DATA = os.environ.get("SLAMD_DATASETS") or os.path.join(HERE, "..", "..", "shared", "datasets")
 RRR = os.path.join(DATA, "rrr")
-BIN = os.environ.get("SLAMD_BIN") or os.path.join(HERE, "..", "target", "release", "slamd")
 THRESHOLDS = ["0.000", "0.500", "1.000"]
-
-
-def slamd(*args):
-    out = subprocess.run([BIN, *args], check=True, capture_output=True, text=True).stdout
-    return json.loads(out.strip().splitlines()[-1])
 
 
 def ground_truth(path):

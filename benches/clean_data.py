@@ -13,16 +13,9 @@ how many the filter ended holding switched off, the RMSE, both χ², and
 the replay's time, p99 and longest wait for a keyframe's snapshot.
 The binary is target/release/slamd (build it first) or $SLAMD_BIN.
 """
-import glob, json, os, subprocess, sys, tempfile
+import glob, os, subprocess, sys, tempfile
+from common import BIN, DATA, slamd
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-DATA = os.environ.get("SLAMD_DATASETS") or os.path.join(HERE, "..", "..", "shared", "datasets")
-BIN = os.environ.get("SLAMD_BIN") or os.path.join(HERE, "..", "target", "release", "slamd")
-
-
-def run(*args):
-    out = subprocess.run([BIN, *args], check=True, capture_output=True, text=True).stdout
-    return json.loads(out.strip().splitlines()[-1])
 
 
 def main():
@@ -41,9 +34,9 @@ def main():
         name = os.path.basename(path)
         polished = os.path.join(tmp, name + ".polish.txt")
         replayed = os.path.join(tmp, name + ".replay.txt")
-        p = run("solve", path, "--polish", "--out", polished, "--json")
-        r = run("replay", path, "--embedded", "--out", replayed, "--json")
-        e = run("eval", path, replayed, "--ground-truth", polished, "--json")
+        p = slamd("solve", path, "--polish", "--out", polished, "--json")
+        r = slamd("replay", path, "--embedded", "--out", replayed, "--json")
+        e = slamd("eval", path, replayed, "--ground-truth", polished, "--json")
         share = r["switched_off"] / max(1, r["loop_closures"])
         rmse = e["ate"]
         print(f"| {name} | {r['loop_closures']} | {r['switched_off']} | {100 * share:.2f}% "

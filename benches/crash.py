@@ -14,10 +14,8 @@ keyframes and edges in the file, in the replay and in the final map.
 The binary is target/release/slamd (build it first) or $SLAMD_BIN.
 """
 import argparse, json, os, random, signal, subprocess, sys, tempfile, time
+from common import BIN, DATA
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-DATA = os.environ.get("SLAMD_DATASETS") or os.path.join(HERE, "..", "..", "shared", "datasets")
-BIN = os.environ.get("SLAMD_BIN") or os.path.join(HERE, "..", "target", "release", "slamd")
 
 
 def main():

@@ -11,10 +11,8 @@ the mean totals. The binary is target/release/slamd (build it first) or
 $SLAMD_BIN.
 """
 import argparse, json, os, signal, statistics, subprocess, time
+from common import BIN, DATA
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-DATA = os.environ.get("SLAMD_DATASETS") or os.path.join(HERE, "..", "..", "shared", "datasets")
-BIN = os.environ.get("SLAMD_BIN") or os.path.join(HERE, "..", "target", "release", "slamd")
 FILES = ["manhattanolson3500_g2oversion.g2o", "city10000.g2o"]
 
 

@@ -15,10 +15,8 @@ estimate by `slamd solve FILE --polish --ground-truth GT --out est.tum
 scores it. The table gives both RMSEs and their difference.
 """
 import json, os, re, subprocess, sys, tempfile
+from common import BIN, DATA
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-DATA = os.environ.get("SLAMD_DATASETS") or os.path.normpath(os.path.join(HERE, "..", "..", "shared", "datasets"))
-SLAMD = os.environ.get("SLAMD_BIN") or os.path.join(HERE, "..", "target", "release", "slamd")
 CASES = [
     ("manhattanolson3500.g2o", "groundtruth/manhattanolson3500_groundtruth_isam.txt"),
     ("city10000.g2o", "groundtruth/city10000_groundtruth_isam.txt"),
@@ -37,9 +35,9 @@ def main():
         gt, est = os.path.join(tmp, "gt.tum"), os.path.join(tmp, "est.tum")
         for name, truth in CASES:
             truth = os.path.join(DATA, truth)
-            subprocess.run([SLAMD, "solve", truth, "--formulation", "odometry", "--out", gt],
+            subprocess.run([BIN, "solve", truth, "--formulation", "odometry", "--out", gt],
                            check=True, capture_output=True)
-            run = subprocess.run([SLAMD, "solve", os.path.join(DATA, name), "--polish", "--ground-truth", truth,
+            run = subprocess.run([BIN, "solve", os.path.join(DATA, name), "--polish", "--ground-truth", truth,
                                   "--out", est, "--json"], check=True, capture_output=True, text=True)
             ours = json.loads(run.stdout)["ate"]
             ours = ours["rmse"] if isinstance(ours, dict) else ours

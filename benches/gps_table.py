@@ -12,9 +12,8 @@ GPS; the table reports ATE against ground truth, and for GPS runs the RMSE
 of the georeferenced positions against the fixes' true ENU positions.
 """
 import argparse, json, os, subprocess, sys, tempfile
+from common import BIN, DATA, HERE
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-DATA = os.environ.get("SLAMD_DATASETS") or os.path.normpath(os.path.join(HERE, "..", "..", "shared", "datasets"))
 TOOL = os.path.normpath(os.path.join(HERE, "..", "..", "shared", "tools", "synth_gps.py"))
 ORIGIN = "45.5138,9.2110"  # synth_gps.py's default
 CASES = [
@@ -30,7 +29,7 @@ def solve(binary, args):
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--slamd", default=os.path.join(HERE, "..", "target", "release", "slamd"))
+    ap.add_argument("--slamd", default=BIN)
     ap.add_argument("--every", type=int, default=20)
     ap.add_argument("--sigma", type=float, default=1.0)
     ap.add_argument("--seed", type=int, default=3)

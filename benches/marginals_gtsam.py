@@ -29,10 +29,8 @@ keyframe; with `--cost g2o` the linearisation calls Python per edge).
 import argparse, json, os, subprocess, sys, tempfile, time
 
 import numpy as np
+from common import BIN, DATA
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-DATA = os.environ.get("SLAMD_DATASETS") or os.path.normpath(os.path.join(HERE, "..", "..", "shared", "datasets"))
-SLAMD = os.environ.get("SLAMD_BIN") or os.path.join(HERE, "..", "target", "release", "slamd")
 FILES = ["manhattanolson3500.g2o", "intel_sesync.g2o", "city10000.g2o"]
 
 
@@ -103,7 +101,7 @@ def main():
         for name in args.files:
             out, cov = os.path.join(tmp, "out.g2o"), os.path.join(tmp, "out.cov")
             run = subprocess.run(
-                [SLAMD, "solve", os.path.join(DATA, name), "--polish", "--json", "--out", out, "--covariances", cov],
+                [BIN, "solve", os.path.join(DATA, name), "--polish", "--json", "--out", out, "--covariances", cov],
                 check=True, capture_output=True, text=True,
             )
             summary = json.loads(run.stdout)

@@ -34,10 +34,9 @@ below 0.5 at its optimum is a rejection).
 """
 import argparse, json, math, os, subprocess, sys, tempfile, time
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-SHARED = os.path.normpath(os.path.join(HERE, "..", "..", "shared"))
-DATA = os.environ.get("SLAMD_DATASETS") or os.path.join(SHARED, "datasets")
-TOOL = os.path.join(SHARED, "tools", "add_outliers.py")
+from common import BIN, DATA, HERE, slamd
+
+TOOL = os.path.join(DATA, "..", "tools", "add_outliers.py")
 DATASETS = {  # name: (file, ground truth)
     "manhattan": ("manhattanolson3500_g2oversion.g2o", "groundtruth/manhattanolson3500_groundtruth_isam.txt"),
     "city": ("city10000.g2o", "groundtruth/city10000_groundtruth_isam.txt"),
@@ -46,14 +45,9 @@ DATASETS = {  # name: (file, ground truth)
 }
 
 
-def slamd(binary, *args):
-    out = subprocess.run([binary, *args], check=True, capture_output=True, text=True)
-    return json.loads(out.stdout)
-
-
 def score(binary, clean, poses, gt):
     args = ["eval", clean, poses, "--json"] + (["--ground-truth", gt] if gt else [])
-    return slamd(binary, *args)
+    return slamd(*args, binary=binary)
 
 
 PEER = """
@@ -134,7 +128,7 @@ def gnc(spoiled, timeout):
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--slamd", default=os.path.join(HERE, "..", "target", "release", "slamd"))
+    ap.add_argument("--slamd", default=BIN)
     ap.add_argument("--datasets", nargs="+", default=list(DATASETS))
     ap.add_argument("--kinds", nargs="+", default=["random", "local", "random-grouped", "local-grouped"])
     ap.add_argument("--counts", nargs="+", type=int, default=[100, 1000, 4000])
@@ -156,9 +150,9 @@ def main():
         file, gt = DATASETS[name]
         clean = os.path.join(DATA, file)
         gt = os.path.join(DATA, gt) if gt else None
-        optimum = slamd(args.slamd, "solve", clean, "--polish", "--json")["chi2"]
+        optimum = slamd("solve", clean, "--polish", "--json", binary=args.slamd)["chi2"]
         gt_args = ["--ground-truth", gt] if gt else []
-        base = slamd(args.slamd, "replay", clean, "--embedded", "--json", *gt_args, *args.extra)
+        base = slamd("replay", clean, "--embedded", "--json", *gt_args, *args.extra, binary=args.slamd)
         for kind in args.kinds:
             for count in args.counts:
                 spoiled = os.path.join(tmp, f"{name}-{kind}-{count}.g2o")
@@ -167,7 +161,7 @@ def main():
                 side = json.load(open(spoiled + ".outliers.json"))
                 injected = {o["edge_index"] for o in side["outliers"]}
                 poses = spoiled + ".poses"
-                r = slamd(args.slamd, "replay", spoiled, "--embedded", "--json", "--out", poses, *gt_args, *args.extra)
+                r = slamd("replay", spoiled, "--embedded", "--json", "--out", poses, *gt_args, *args.extra, binary=args.slamd)
                 caught = injected & set(r["rejected_edges"])
                 precision = len(caught) / max(1, len(r["rejected_edges"]))
                 recall = len(caught) / len(injected)

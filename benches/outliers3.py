@@ -14,9 +14,8 @@ engine runs by default), and scores the switched-off loop closures against the s
 after rigid alignment). The first row is the clean file.
 """
 import argparse, json, os, subprocess, sys, tempfile
+from common import BIN, DATA, HERE
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-DATA = os.environ.get("SLAMD_DATASETS") or os.path.normpath(os.path.join(HERE, "..", "..", "shared", "datasets"))
 KINDS = ("random", "local", "random-grouped", "local-grouped")
 
 
@@ -32,7 +31,7 @@ def solve(binary, path, truth, online):
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--slamd", default=os.path.join(HERE, "..", "target", "release", "slamd"))
+    ap.add_argument("--slamd", default=BIN)
     ap.add_argument("--file", default="3d/sphere2500.g2o")
     ap.add_argument("--ground-truth", default="3d/groundtruth/sphere2500_groundtruth_isam.txt")
     ap.add_argument("--count", type=int, default=1000)

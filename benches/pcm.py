@@ -37,9 +37,8 @@ import argparse, json, os, subprocess, sys, tempfile, time
 
 import numpy as np
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, HERE)
-from outliers import DATA, DATASETS, TOOL, slamd  # noqa: E402
+from outliers import DATASETS, TOOL  # noqa: E402
+from common import BIN, DATA, slamd
 
 CHI2_3_99 = 11.3449
 
@@ -172,7 +171,7 @@ def pcm(path, scale, starts):
 
 
 def variance_factor(binary, clean):
-    r = slamd(binary, "solve", clean, "--polish", "--json")
+    r = slamd("solve", clean, "--polish", "--json", binary=binary)
     return r["chi2"] / (3 * r["edges"] - 3 * (r["nodes"] - 1))
 
 
@@ -198,7 +197,7 @@ def without(path, left_out, out):
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--slamd", default=os.environ.get("SLAMD_BIN") or os.path.join(HERE, "..", "target", "release", "slamd"))
+    ap.add_argument("--slamd", default=BIN)
     ap.add_argument("--datasets", nargs="+", default=["intel", "manhattan", "ringcity"])
     ap.add_argument("--kinds", nargs="+", default=["random", "local", "random-grouped", "local-grouped"])
     ap.add_argument("--counts", nargs="+", type=int, default=[1000, 4000])
@@ -227,7 +226,7 @@ def main():
                     side = json.load(open(spoiled + ".outliers.json"))
                     runs.append((f"{count} {kind}", seed, spoiled, {o["edge_index"] for o in side["outliers"]}))
         for label, seed, path, injected in runs:
-            r = slamd(args.slamd, "replay", path, "--embedded", "--json")
+            r = slamd("replay", path, "--embedded", "--json", binary=args.slamd)
             off = set(r["rejected_edges"])
             sp, sr = pr(off, injected)
             left_out, loops, secs = pcm(path, scale, args.starts)
@@ -238,7 +237,7 @@ def main():
             if args.then_slamd:
                 rest = path + ".pcm.g2o"
                 index = without(path, left_out, rest)
-                r2 = slamd(args.slamd, "replay", rest, "--embedded", "--json")
+                r2 = slamd("replay", rest, "--embedded", "--json", binary=args.slamd)
                 both = left_out | {index[e] for e in r2["rejected_edges"]}
                 bp, br = pr(both, injected)
                 row += f" {bp:.3f} / {br:.3f} | {len(both - injected)} |"

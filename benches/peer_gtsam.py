@@ -45,9 +45,8 @@ reported as "fails (reason)" beside slamd's result.
 """
 import argparse, json, math, multiprocessing, os, subprocess, sys, tempfile, time
 
-from common import DATA, positive_definite, upper
+from common import BIN, DATA, positive_definite, upper, slamd
 
-HERE = os.path.dirname(os.path.abspath(__file__))
 CASES = [  # file, optimum χ², ground truth
     ("manhattanolson3500_g2oversion.g2o", 146.077, "groundtruth/manhattanolson3500_nodes_groundtruth.dat"),
     ("city10000.g2o", 511.985, "groundtruth/city10000_groundtruth_isam.txt"),
@@ -262,25 +261,20 @@ def without_invalid_edges(path):
     return f.name, dropped
 
 
-def slamd(binary, args):
-    out = subprocess.run([binary] + args, check=True, capture_output=True, text=True).stdout
-    return json.loads(out)
-
-
 def table_2d(args):
     cases = [c for c in CASES if not args.files or c[0] in args.files]
     rows = []
     for name, optimum, gt in cases:
         path = os.path.join(DATA, name)
         gt_args = ["--ground-truth", os.path.join(DATA, gt)] if gt else []
-        runs = [slamd(args.slamd, ["solve", path, "--polish", "--json"] + gt_args) for _ in range(args.repeat)]
+        runs = [slamd("solve", path, "--polish", "--json", *gt_args, binary=args.slamd) for _ in range(args.repeat)]
         mine = min(runs, key=lambda r: r["seconds"])
         result, secs, iters = run_gtsam(path, args.repeat)
         with tempfile.NamedTemporaryFile("w", suffix=".txt", delete=False) as f:
             for k in sorted(result.keys()):
                 p = result.atPose2(k)
                 f.write(f"{k} {p.x()!r} {p.y()!r} {p.theta()!r}\n")
-        peer = slamd(args.slamd, ["eval", path, f.name, "--json"] + gt_args)
+        peer = slamd("eval", path, f.name, "--json", *gt_args, binary=args.slamd)
         os.unlink(f.name)
         rows.append((name, optimum, mine, peer, secs, iters))
 
@@ -295,7 +289,7 @@ def table_2d(args):
 def slamd_or_reason(binary, args):
     """slamd's JSON, or the first line of its complaint."""
     try:
-        return slamd(binary, args), None
+        return slamd(*args, binary=binary), None
     except subprocess.CalledProcessError as e:
         return None, (e.stderr.strip().splitlines() or [f"exit code {e.returncode}"])[0]
 
@@ -372,7 +366,7 @@ def table_3d(args):
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--slamd", default=os.path.join(HERE, "..", "target", "release", "slamd"))
+    ap.add_argument("--slamd", default=BIN)
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--3d", dest="three_d", action="store_true", help="the 3-D files under DATASETS/3d instead of the 2-D ones")
     ap.add_argument("--files", nargs="+", metavar="NAME", help="only these files of the table (names as listed in CASES/CASES3)")

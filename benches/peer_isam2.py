@@ -44,9 +44,8 @@ borglab/gtsam#406) is run again with factorization QR, and the figures of
 that run are marked (--no-qr-retry: report the failure only).
 """
 import argparse, json, os, subprocess, sys, tempfile, threading, time
+from common import BIN, DATA
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-DATA = os.environ.get("SLAMD_DATASETS") or os.path.normpath(os.path.join(HERE, "..", "..", "shared", "datasets"))
 DEFAULT = ["manhattanolson3500_g2oversion.g2o", "city10000.g2o", "w10000.graph"]
 DEFAULT3 = ["sphere2500.g2o", "parking-garage.g2o", "torus3d.g2o"]  # under DATA/3d
 
@@ -114,7 +113,6 @@ def isam2_replay3(path, factorization):
     import gtsam
     import numpy as np
 
-    sys.path.insert(0, HERE)
     from peer_gtsam import first_paragraph, read_3d
 
     _, edges = read_3d(path)  # (i, j, Z, Ω in GTSAM's order) as written, file order
@@ -272,7 +270,7 @@ def table_3d(args):
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("files", nargs="*")
-    ap.add_argument("--slamd", default=os.path.join(HERE, "..", "target", "release", "slamd"))
+    ap.add_argument("--slamd", default=BIN)
     ap.add_argument("--3d", dest="three_d", action="store_true",
                     help="the 3-D table: FILEs (default: " + ", ".join(DEFAULT3) + ") under DATASETS/3d")
     ap.add_argument("--peer-timeout", type=float, default=0, metavar="S",

@@ -23,10 +23,8 @@ past the gauge.
 import argparse, json, os, subprocess, time
 
 import slamd
+from common import BIN, DATA
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-DATA = os.environ.get("SLAMD_DATASETS") or os.path.normpath(os.path.join(HERE, "..", "..", "shared", "datasets"))
-SLAMD = os.environ.get("SLAMD_BIN") or os.path.join(HERE, "..", "target", "release", "slamd")
 
 
 def steps(graph):
@@ -61,7 +59,7 @@ def marginal_ms(engine, keyframe, calls=50):
 
 
 def rust_replay(path):
-    out = subprocess.run([SLAMD, "replay", path, "--embedded", "--json"], check=True, capture_output=True, text=True)
+    out = subprocess.run([BIN, "replay", path, "--embedded", "--json"], check=True, capture_output=True, text=True)
     d = json.loads(out.stdout)
     return d["total_s"], d["chi2"]
 

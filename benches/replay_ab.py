@@ -12,9 +12,8 @@ With `--check-prefixes N`, each run also checks N sampled snapshots
 against their prefix's optimum and the worst ratio is printed.
 """
 import argparse, json, os, subprocess, sys
+from common import DATA
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-DATA = os.environ.get("SLAMD_DATASETS") or os.path.join(HERE, "..", "..", "shared", "datasets")
 FILES = ["manhattanolson3500_g2oversion.g2o", "city10000.g2o"]
 
 

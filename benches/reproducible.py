@@ -16,9 +16,8 @@ $SLAMD_BIN.
 import argparse, json, os, subprocess, sys, tempfile
 from concurrent.futures import ThreadPoolExecutor
 
-from common import DATA, HERE
+from common import BIN, DATA
 
-BIN = os.environ.get("SLAMD_BIN") or os.path.join(HERE, "..", "target", "release", "slamd")
 TOOL = os.path.join(DATA, "..", "tools", "add_outliers.py")
 CASES = [  # (name, file, kind, count); kind None: the file as it is
     ("manhattan + 4000 random", "manhattanolson3500_g2oversion.g2o", "random", 4000),

@@ -11,10 +11,8 @@ panel draws the estimate (blue) over the ground truth (grey) rigidly aligned
 onto it, with the ATE that alignment leaves.
 """
 import argparse, json, math, os, subprocess, sys, tempfile
+from common import BIN, DATA, HERE
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-SHARED = os.path.normpath(os.path.join(HERE, "..", "..", "shared"))
-DATA = os.environ.get("SLAMD_DATASETS") or os.path.join(SHARED, "datasets")
 CLEAN = os.path.join(DATA, "city10000.g2o")
 GT = os.path.join(DATA, "groundtruth", "city10000_groundtruth_isam.txt")
 
@@ -63,13 +61,13 @@ def panel(x0, w, h, title, layers):
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--slamd", default=os.path.join(HERE, "..", "target", "release", "slamd"))
+    ap.add_argument("--slamd", default=BIN)
     ap.add_argument("--out", default=os.path.join(HERE, "..", "docs", "robustness-city10000.svg"))
     ap.add_argument("--seed", type=int, default=1)
     args = ap.parse_args()
     tmp = tempfile.mkdtemp(prefix="slamd-svg-")
     spoiled = os.path.join(tmp, "city-random-1000.g2o")
-    subprocess.run([sys.executable, os.path.join(SHARED, "tools", "add_outliers.py"), "-i", CLEAN, "-o", spoiled,
+    subprocess.run([sys.executable, os.path.join(DATA, "..", "tools", "add_outliers.py"), "-i", CLEAN, "-o", spoiled,
                     "--kind", "random", "--count", "1000", "--seed", str(args.seed)], check=True, capture_output=True)
     plain, robust = os.path.join(tmp, "plain.txt"), os.path.join(tmp, "robust.txt")
     subprocess.run([args.slamd, "solve", spoiled, "--polish", "--out", plain], check=True, capture_output=True)

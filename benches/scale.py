@@ -16,9 +16,8 @@ The binary is target/release/slamd or $SLAMD_BIN.
 """
 import argparse, json, os, re, signal, subprocess, sys, tempfile, time
 
-from common import HERE
+from common import BIN
 
-BIN = os.environ.get("SLAMD_BIN") or os.path.join(HERE, "..", "target", "release", "slamd")
 
 
 def peak_rss(time_report):

@@ -27,9 +27,8 @@ import json, math, os, subprocess, sys, tempfile
 
 import numpy as np
 
-from common import DATA, HERE, upper
+from common import BIN, DATA, upper
 
-BIN = os.environ.get("SLAMD_BIN") or os.path.join(HERE, "..", "target", "release", "slamd")
 TOOL = os.path.join(DATA, "..", "tools", "add_outliers.py")
 FILES = {"intel": "intel_sesync.g2o", "ringcity": "ringcity.g2o", "manhattan": "manhattanolson3500_g2oversion.g2o"}
 
