@@ -1,11 +1,12 @@
 //! Accuracy against ground truth: the absolute trajectory error (ATE).
 //!
-//! ATE is the position RMSE after the rigid 2-D motion `(R, t)` that best
-//! aligns the estimate to the truth: with centred points `e'_k`, `g'_k`,
-//! `R = arg Σ g'_k ē'_k` and `t = ḡ − R ē` (Kabsch in the plane).
+//! ATE is the position RMSE after the rigid motion `(R, t)` that best
+//! aligns the estimate to the truth. In the plane, with centred points
+//! `e'_k`, `g'_k`: `R = arg Σ g'_k ē'_k` and `t = ḡ − R ē` (Kabsch in
+//! complex numbers); in space, Kabsch by the SVD ([`align_rigid3`]).
 
 use crate::geometry::Pose2;
-use crate::graph::{KeyframeId, Pose3, PoseGraph};
+use crate::graph::{KeyframeId, Pose3, PoseGraph, RigidMotion};
 use faer::c64;
 use nalgebra::{Matrix3, Rotation3, Vector3};
 use std::collections::HashMap;
@@ -45,26 +46,6 @@ pub fn aligned_onto(moving: &[Pose2], fixed: &[Pose2]) -> Vec<Pose2> {
         .collect()
 }
 
-/// ATE of `poses` (indexed like `graph`) against truth keyed by keyframe id.
-/// `None` when fewer than two keyframes match.
-pub fn ate(graph: &PoseGraph, poses: &[Pose2], truth: &HashMap<KeyframeId, Pose2>) -> Option<Ate> {
-    let (est, gt): (Vec<c64>, Vec<c64>) = graph
-        .keyframes()
-        .iter()
-        .zip(poses)
-        .filter_map(|(k, p)| truth.get(&k.id).map(|g| (p.position(), g.position())))
-        .unzip();
-    if est.len() < 2 {
-        return None;
-    }
-    let (r, t) = align_rigid(&est, &gt);
-    let sq: f64 = est.iter().zip(&gt).map(|(e, g)| (r * e + t - g).norm_sqr()).sum();
-    Some(Ate {
-        rmse: (sq / est.len() as f64).sqrt(),
-        matched: est.len(),
-    })
-}
-
 /// The rigid motion `x ↦ R x + t` best aligning `from` onto `to` in 3-D
 /// (Kabsch: the SVD of the cross-covariance, with a reflection turned
 /// into a rotation).
@@ -81,27 +62,57 @@ pub fn align_rigid3(from: &[Vector3<f64>], to: &[Vector3<f64>]) -> (Rotation3<f6
     (r, ct - r * cf)
 }
 
-/// ATE of 3-D `poses` (indexed like `graph`) against truth keyed by
-/// keyframe id, after the best rigid alignment. `None` when fewer than
-/// three keyframes match.
-pub fn ate3(graph: &PoseGraph<Pose3>, poses: &[Pose3], truth: &HashMap<KeyframeId, Pose3>) -> Option<Ate> {
-    let (est, gt): (Vec<Vector3<f64>>, Vec<Vector3<f64>>) = graph
+/// A pose whose positions can be aligned rigidly: the plane's Kabsch in
+/// complex numbers, space's by the SVD.
+pub trait Aligned: RigidMotion {
+    /// Keyframes needed to fix the alignment (2 in the plane, 3 in space).
+    const MIN_MATCHED: usize;
+
+    /// The position RMSE of `est` after the rigid motion that best aligns
+    /// it onto `truth` (matched by index).
+    fn aligned_rmse(est: &[Self], truth: &[Self]) -> f64;
+}
+
+impl Aligned for Pose2 {
+    const MIN_MATCHED: usize = 2;
+
+    fn aligned_rmse(est: &[Pose2], truth: &[Pose2]) -> f64 {
+        let est: Vec<c64> = est.iter().map(|p| p.position()).collect();
+        let gt: Vec<c64> = truth.iter().map(|p| p.position()).collect();
+        let (r, t) = align_rigid(&est, &gt);
+        let sq: f64 = est.iter().zip(&gt).map(|(e, g)| (r * e + t - g).norm_sqr()).sum();
+        (sq / est.len() as f64).sqrt()
+    }
+}
+
+impl Aligned for Pose3 {
+    const MIN_MATCHED: usize = 3;
+
+    fn aligned_rmse(est: &[Pose3], truth: &[Pose3]) -> f64 {
+        let est: Vec<Vector3<f64>> = est.iter().map(|p| p.translation).collect();
+        let gt: Vec<Vector3<f64>> = truth.iter().map(|p| p.translation).collect();
+        let (r, t) = align_rigid3(&est, &gt);
+        let sq: f64 = est
+            .iter()
+            .zip(&gt)
+            .map(|(e, g)| (r * e + t - g).norm_squared())
+            .sum();
+        (sq / est.len() as f64).sqrt()
+    }
+}
+
+/// ATE of `poses` (indexed like `graph`) against truth keyed by keyframe
+/// id, after the best rigid alignment. `None` when fewer keyframes match
+/// than the alignment needs ([`Aligned::MIN_MATCHED`]).
+pub fn ate<P: Aligned>(graph: &PoseGraph<P>, poses: &[P], truth: &HashMap<KeyframeId, P>) -> Option<Ate> {
+    let (est, gt): (Vec<P>, Vec<P>) = graph
         .keyframes()
         .iter()
         .zip(poses)
-        .filter_map(|(k, p)| truth.get(&k.id).map(|g| (p.translation, g.translation)))
+        .filter_map(|(k, p)| truth.get(&k.id).map(|g| (*p, *g)))
         .unzip();
-    if est.len() < 3 {
-        return None;
-    }
-    let (r, t) = align_rigid3(&est, &gt);
-    let sq: f64 = est
-        .iter()
-        .zip(&gt)
-        .map(|(e, g)| (r * e + t - g).norm_squared())
-        .sum();
-    Some(Ate {
-        rmse: (sq / est.len() as f64).sqrt(),
+    (est.len() >= P::MIN_MATCHED).then(|| Ate {
+        rmse: P::aligned_rmse(&est, &gt),
         matched: est.len(),
     })
 }
@@ -146,12 +157,12 @@ mod tests {
         }
         let m = Pose3::from_xyz_rpy([3.0, -1.0, 2.0, 0.4, -1.2, 2.8]);
         let moved: Vec<Pose3> = (0..5).map(|i| m.compose(&truth[&i])).collect();
-        let a = ate3(&g, &moved, &truth).unwrap();
+        let a = ate(&g, &moved, &truth).unwrap();
         assert!(a.rmse < 1e-12 && a.matched == 5, "{}", a.rmse);
         let mut noisy = moved.clone();
         noisy[2].translation.z += 0.5;
         // one point off by 0.5 among five: the aligned RMSE lies below 0.5/√5
-        let a = ate3(&g, &noisy, &truth).unwrap();
+        let a = ate(&g, &noisy, &truth).unwrap();
         assert!(a.rmse > 0.05 && a.rmse < 0.5 / 5f64.sqrt(), "{}", a.rmse);
     }
 }

@@ -21,9 +21,9 @@ mod write;
 
 pub use error::{ReadError, ReadErrorKind};
 pub use gps_csv::{read_fixes, FixRecord};
-pub use poses::{read_ground_truth, read_ground_truth3, read_pose_table};
+pub use poses::{read_ground_truth, read_pose_table, TruthPose};
 pub use trajectory::{read_trajectory, write_trajectory, write_trajectory_at, FromSpatial, Trajectory};
-pub use write::{write_g2o, write_g2o3, write_pose_table};
+pub use write::{write_g2o, write_pose_table, G2oPose};
 
 use crate::geometry::Pose2;
 use crate::graph::{EdgeKind, GraphError, Information, Keyframe, KeyframeId, Pose3, PoseGraph, RigidMotion};

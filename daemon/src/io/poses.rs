@@ -2,7 +2,7 @@
 
 use super::{numbers, read_graph, ReadError, ReadErrorKind};
 use crate::geometry::Pose2;
-use crate::graph::KeyframeId;
+use crate::graph::{KeyframeId, Pose3, RigidMotion};
 use std::collections::HashMap;
 use std::path::Path;
 
@@ -46,44 +46,58 @@ pub(crate) fn parse_pose_table(path: &Path, text: &str) -> Result<HashMap<Keyfra
     Ok(poses)
 }
 
-/// Reads ground truth: a pose table, or a noise-free graph file whose edges
-/// are composed along a spanning tree from the first keyframe (odometry
-/// first).
-pub fn read_ground_truth(path: &Path) -> Result<HashMap<KeyframeId, Pose2>, ReadError> {
-    let text = std::fs::read_to_string(path).map_err(|e| ReadError::io(path, e))?;
-    let first_tag = text
-        .lines()
-        .map(|l| l.split('#').next().unwrap_or("").trim())
-        .find(|l| !l.is_empty())
-        .and_then(|l| l.split_whitespace().next())
-        .unwrap_or("");
-    if first_tag.chars().next().is_some_and(|c| c.is_ascii_alphabetic()) {
-        let graph = read_graph(path)?;
-        let poses = graph
-            .compose_spanning_tree()
-            .map_err(|e| ReadError::graph(path, e))?;
+/// A pose whose ground truth can be read.
+pub trait TruthPose: RigidMotion {
+    /// The truth in the file at `path`, keyed by keyframe id.
+    fn read_ground_truth(path: &Path) -> Result<HashMap<KeyframeId, Self>, ReadError>;
+}
+
+/// Reads ground truth: in the plane a pose table, or a noise-free graph
+/// file whose edges are composed along a spanning tree from the first
+/// keyframe (odometry first); in space a noise-free 3-D graph file, its
+/// vertices where it has any, else its edges composed along a spanning
+/// tree.
+pub fn read_ground_truth<P: TruthPose>(path: &Path) -> Result<HashMap<KeyframeId, P>, ReadError> {
+    P::read_ground_truth(path)
+}
+
+impl TruthPose for Pose2 {
+    fn read_ground_truth(path: &Path) -> Result<HashMap<KeyframeId, Pose2>, ReadError> {
+        let text = std::fs::read_to_string(path).map_err(|e| ReadError::io(path, e))?;
+        let first_tag = text
+            .lines()
+            .map(|l| l.split('#').next().unwrap_or("").trim())
+            .find(|l| !l.is_empty())
+            .and_then(|l| l.split_whitespace().next())
+            .unwrap_or("");
+        if first_tag.chars().next().is_some_and(|c| c.is_ascii_alphabetic()) {
+            let graph = read_graph(path)?;
+            let poses = graph
+                .compose_spanning_tree()
+                .map_err(|e| ReadError::graph(path, e))?;
+            Ok(graph
+                .keyframes()
+                .iter()
+                .zip(poses)
+                .map(|(k, p)| (k.id, p))
+                .collect())
+        } else {
+            parse_pose_table(path, &text)
+        }
+    }
+}
+
+impl TruthPose for Pose3 {
+    fn read_ground_truth(path: &Path) -> Result<HashMap<KeyframeId, Pose3>, ReadError> {
+        let graph = super::read_graph3(path)?;
+        let poses = graph.initial_guess().map_err(|e| ReadError::graph(path, e))?;
         Ok(graph
             .keyframes()
             .iter()
             .zip(poses)
             .map(|(k, p)| (k.id, p))
             .collect())
-    } else {
-        parse_pose_table(path, &text)
     }
-}
-
-/// Reads 3-D ground truth: a noise-free 3-D graph file, its vertices
-/// where it has any, else its edges composed along a spanning tree.
-pub fn read_ground_truth3(path: &Path) -> Result<HashMap<KeyframeId, crate::graph::Pose3>, ReadError> {
-    let graph = super::read_graph3(path)?;
-    let poses = graph.initial_guess().map_err(|e| ReadError::graph(path, e))?;
-    Ok(graph
-        .keyframes()
-        .iter()
-        .zip(poses)
-        .map(|(k, p)| (k.id, p))
-        .collect())
 }
 
 #[cfg(test)]

@@ -1,52 +1,77 @@
 //! Writing results: g2o (vertices plus the graph's edges) and `id x y θ`.
 
 use crate::geometry::Pose2;
-use crate::graph::{Pose3, PoseGraph};
+use crate::graph::{Edge, KeyframeId, Pose3, PoseGraph, RigidMotion};
 use std::io::Write;
 
-/// Writes the graph as g2o with `poses` as its vertices.
-pub fn write_g2o(out: &mut impl Write, graph: &PoseGraph, poses: &[Pose2]) -> std::io::Result<()> {
-    for (k, p) in graph.keyframes().iter().zip(poses) {
-        writeln!(out, "VERTEX_SE2 {} {} {} {}", k.id, p.x, p.y, p.theta)?;
+/// A pose g2o writes: its vertex and edge lines.
+pub trait G2oPose: RigidMotion {
+    /// The vertex line of keyframe `id` at this pose.
+    fn write_vertex(&self, out: &mut impl Write, id: KeyframeId) -> std::io::Result<()>;
+    /// The edge line of `edge`, between keyframes `from` and `to`.
+    fn write_edge(
+        out: &mut impl Write,
+        from: KeyframeId,
+        to: KeyframeId,
+        edge: &Edge<Self>,
+    ) -> std::io::Result<()>;
+}
+
+impl G2oPose for Pose2 {
+    /// `VERTEX_SE2 id x y θ`.
+    fn write_vertex(&self, out: &mut impl Write, id: KeyframeId) -> std::io::Result<()> {
+        writeln!(out, "VERTEX_SE2 {} {} {} {}", id, self.x, self.y, self.theta)
     }
-    for e in graph.edges() {
+
+    /// `EDGE_SE2 from to x y θ` and Ω's upper triangle.
+    fn write_edge(out: &mut impl Write, from: KeyframeId, to: KeyframeId, e: &Edge) -> std::io::Result<()> {
         let m = e.measurement;
         let u = e.information.upper();
         writeln!(
             out,
             "EDGE_SE2 {} {} {} {} {} {} {} {} {} {} {}",
-            graph.id_of(e.from),
-            graph.id_of(e.to),
-            m.x,
-            m.y,
-            m.theta,
-            u[0],
-            u[1],
-            u[2],
-            u[3],
-            u[4],
-            u[5]
-        )?;
+            from, to, m.x, m.y, m.theta, u[0], u[1], u[2], u[3], u[4], u[5]
+        )
     }
-    Ok(())
 }
 
-/// Writes a 3-D graph as g2o (`VERTEX_SE3:QUAT`, `EDGE_SE3:QUAT`) with
-/// `poses` as its vertices.
-pub fn write_g2o3(out: &mut impl Write, graph: &PoseGraph<Pose3>, poses: &[Pose3]) -> std::io::Result<()> {
-    let join = |v: &[f64]| v.iter().map(|x| x.to_string()).collect::<Vec<_>>().join(" ");
-    for (k, p) in graph.keyframes().iter().zip(poses) {
-        writeln!(out, "VERTEX_SE3:QUAT {} {}", k.id, join(&p.to_xyz_quaternion()))?;
+impl G2oPose for Pose3 {
+    /// `VERTEX_SE3:QUAT id x y z qx qy qz qw`.
+    fn write_vertex(&self, out: &mut impl Write, id: KeyframeId) -> std::io::Result<()> {
+        writeln!(out, "VERTEX_SE3:QUAT {} {}", id, join(&self.to_xyz_quaternion()))
     }
-    for e in graph.edges() {
+
+    /// `EDGE_SE3:QUAT from to` the measurement and Ω's upper triangle.
+    fn write_edge(
+        out: &mut impl Write,
+        from: KeyframeId,
+        to: KeyframeId,
+        e: &Edge<Pose3>,
+    ) -> std::io::Result<()> {
         writeln!(
             out,
             "EDGE_SE3:QUAT {} {} {} {}",
-            graph.id_of(e.from),
-            graph.id_of(e.to),
+            from,
+            to,
             join(&e.measurement.to_xyz_quaternion()),
             join(&e.information.upper())
-        )?;
+        )
+    }
+}
+
+/// Numbers separated by spaces.
+fn join(v: &[f64]) -> String {
+    v.iter().map(|x| x.to_string()).collect::<Vec<_>>().join(" ")
+}
+
+/// Writes the graph as g2o (`VERTEX_SE2`/`EDGE_SE2`, or `VERTEX_SE3:QUAT`/
+/// `EDGE_SE3:QUAT`) with `poses` as its vertices.
+pub fn write_g2o<P: G2oPose>(out: &mut impl Write, graph: &PoseGraph<P>, poses: &[P]) -> std::io::Result<()> {
+    for (k, p) in graph.keyframes().iter().zip(poses) {
+        p.write_vertex(out, k.id)?;
+    }
+    for e in graph.edges() {
+        P::write_edge(out, graph.id_of(e.from), graph.id_of(e.to), e)?;
     }
     Ok(())
 }

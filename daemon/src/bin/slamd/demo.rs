@@ -10,7 +10,7 @@ use anyhow::Context;
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use slamd::config::Config;
-use slamd::eval::{aligned_onto, ate, ate3, Ate};
+use slamd::eval::{aligned_onto, ate, Aligned};
 use slamd::geometry::Pose2;
 use slamd::graph::{chi2, KeyframeId, Pose3, PoseGraph};
 use slamd::io::{svg, AnyGraph, OnInvalid};
@@ -45,28 +45,20 @@ pub struct DemoOpts {
 }
 
 /// What the demo does per dimension.
-trait DemoPose: ReplayPose + slamd::graph::EdgeCost {
+trait DemoPose: ReplayPose + slamd::graph::EdgeCost + Aligned {
     /// The pose seen from above.
     fn top(&self) -> Pose2;
-    /// ATE of `poses` against `truth`.
-    fn ate(graph: &PoseGraph<Self>, poses: &[Self], truth: &HashMap<KeyframeId, Self>) -> Option<Ate>;
 }
 
 impl DemoPose for Pose2 {
     fn top(&self) -> Pose2 {
         *self
     }
-    fn ate(graph: &PoseGraph, poses: &[Pose2], truth: &HashMap<KeyframeId, Pose2>) -> Option<Ate> {
-        ate(graph, poses, truth)
-    }
 }
 
 impl DemoPose for Pose3 {
     fn top(&self) -> Pose2 {
         top_view(self)
-    }
-    fn ate(graph: &PoseGraph<Pose3>, poses: &[Pose3], truth: &HashMap<KeyframeId, Pose3>) -> Option<Ate> {
-        ate3(graph, poses, truth)
     }
 }
 
@@ -177,7 +169,7 @@ fn show<P: DemoPose>(
     let lat = Latency::of(out.latencies);
     let ate_of = |p: &[P]| {
         truth
-            .and_then(|t| P::ate(graph, p, t))
+            .and_then(|t| ate(graph, p, t))
             .map_or("–".to_string(), |a| format!("{:.3}", a.rmse))
     };
     println!();

@@ -55,10 +55,10 @@ pub fn run(opts: EvalOpts) -> anyhow::Result<()> {
             let truth = opts
                 .ground_truth
                 .as_deref()
-                .map(io::read_ground_truth3)
+                .map(io::read_ground_truth)
                 .transpose()?;
             score(&opts, &graph, &table, |poses| {
-                truth.as_ref().and_then(|t| slamd::eval::ate3(&graph, poses, t))
+                truth.as_ref().and_then(|t| slamd::eval::ate(&graph, poses, t))
             })
         }
     }

@@ -3,6 +3,7 @@
 
 use anyhow::Context;
 use clap::Args;
+use slamd::geometry::Pose2;
 use slamd::outliers::REJECTED_BELOW;
 use slamd::store::MapFile;
 use std::io::Write;
@@ -24,7 +25,7 @@ pub struct ExportOpts {
 }
 
 pub fn run(opts: ExportOpts) -> anyhow::Result<()> {
-    let mut map = MapFile::read(&opts.map)?;
+    let mut map = MapFile::<Pose2>::read(&opts.map)?;
     let total = map.edges.len();
     if opts.drop_rejected {
         map.edges.retain(|e| e.switch >= REJECTED_BELOW);

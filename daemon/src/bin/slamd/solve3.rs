@@ -3,7 +3,7 @@
 
 use crate::solve::{file_name, plot_layers, print_head, print_result, summary_json, SolveOpts};
 use anyhow::{bail, Context};
-use slamd::eval::{aligned_onto, ate3};
+use slamd::eval::{aligned_onto, ate};
 use slamd::geometry::Pose2;
 use slamd::graph::{Pose3, PoseGraph};
 use slamd::io::{self, svg};
@@ -20,7 +20,7 @@ pub fn run(opts: &SolveOpts, graph: &PoseGraph<Pose3>, skipped: serde_json::Valu
     let truth = opts
         .ground_truth
         .as_deref()
-        .map(io::read_ground_truth3)
+        .map(io::read_ground_truth)
         .transpose()?;
     let options = BatchOptions {
         formulation: opts.formulation,
@@ -29,14 +29,14 @@ pub fn run(opts: &SolveOpts, graph: &PoseGraph<Pose3>, skipped: serde_json::Valu
         ..Default::default()
     };
     let sol = solve_batch3(graph, &options).with_context(|| format!("solving {}", opts.file.display()))?;
-    let ate = truth.as_ref().and_then(|t| ate3(graph, &sol.poses, t));
+    let ate = truth.as_ref().and_then(|t| ate(graph, &sol.poses, t));
     if let Some(out) = &opts.out {
         let file = std::fs::File::create(out).with_context(|| format!("creating {}", out.display()))?;
         let mut w = std::io::BufWriter::new(file);
         if let Some(layout) = io::Trajectory::of(out) {
             io::write_trajectory(&mut w, layout, &crate::solve::keyframe_ids(graph), &sol.poses)?;
         } else if out.extension().is_some_and(|e| e == "g2o") {
-            io::write_g2o3(&mut w, graph, &sol.poses)?;
+            io::write_g2o(&mut w, graph, &sol.poses)?;
         } else {
             for (k, p) in graph.keyframes().iter().zip(&sol.poses) {
                 let v = p.to_xyz_quaternion().map(|x| x.to_string()).join(" ");

@@ -46,10 +46,10 @@ pub fn run(opts: SynthOpts) -> anyhow::Result<()> {
         let world = generate3(&params, opts.storeys);
         let guess = world.graph.compose_spanning_tree()?;
         let mut g = create(&opts.out)?;
-        slamd::io::write_g2o3(&mut g, &world.graph, &guess)?;
+        slamd::io::write_g2o(&mut g, &world.graph, &guess)?;
         g.flush()?;
         let mut t = create(&opts.truth)?;
-        slamd::io::write_g2o3(&mut t, &world.graph, &world.truth)?;
+        slamd::io::write_g2o(&mut t, &world.graph, &world.truth)?;
         t.flush()?;
         eprintln!(
             "wrote {} ({} keyframes, {} edges, {} storeys) and {}",

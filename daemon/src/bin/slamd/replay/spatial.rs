@@ -22,7 +22,7 @@ pub fn run(
     let truth = opts
         .ground_truth
         .as_deref()
-        .map(io::read_ground_truth3)
+        .map(io::read_ground_truth)
         .transpose()?;
     let checkpoints = super::checkpoints(opts, graph.len());
     let mut sink = super::sink::<Pose3>(opts, config)?;
@@ -33,12 +33,12 @@ pub fn run(
             Some(layout) => {
                 io::write_trajectory(&mut w, layout, &crate::solve::keyframe_ids(&graph), &out.poses)?
             }
-            None => io::write_g2o3(&mut w, &graph, &out.poses)?,
+            None => io::write_g2o(&mut w, &graph, &out.poses)?,
         }
     }
     let ate = truth
         .as_ref()
-        .and_then(|t| slamd::eval::ate3(&graph, &out.poses, t))
+        .and_then(|t| slamd::eval::ate(&graph, &out.poses, t))
         .map(|a| a.rmse);
     let (mode, stats) = (sink.mode(), sink.engine_stats());
     let report = Report::of(&graph, out, mode, stats, ate, |prefix| {
