@@ -74,7 +74,7 @@ impl<P: EnginePose> Background<P> {
         };
         let (model, estimate) = (&state.model, state.estimate());
         let n = model.graph.len();
-        for k in (self.hinted..n).filter(|&k| model.joined[k]) {
+        for k in (self.hinted..n).filter(|&k| model.joined(k)) {
             job.hint(k, estimate[k]);
         }
         self.hinted = n;
@@ -156,7 +156,10 @@ pub fn catch_up<P: EnginePose>(
         return None;
     };
     let base = state.work();
-    state.set_hints(foreground.estimate(), &foreground.model.joined);
+    state.set_hints(
+        foreground.estimate(),
+        foreground.model.keyframes.iter().map(|k| k.joined),
+    );
     let (caught_up, mut replayed) = (Instant::now(), 0);
     for (seq, op) in log {
         if last_seq.is_none_or(|last| seq > last) {

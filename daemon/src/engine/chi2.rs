@@ -70,7 +70,7 @@ impl Chi2Cache {
             self.stamp.resize(self.per_edge.len(), 0);
         }
         for &k in moved {
-            for &e in &model.incident[k] {
+            for &e in &model.keyframes[k].incident {
                 let e = e as usize;
                 if self.stamp[e] != self.epoch {
                     self.stamp[e] = self.epoch;

@@ -47,7 +47,7 @@ impl<P: EnginePose> Engine<P> {
         for &id in ids {
             let model = &self.state.model;
             let k = (model.graph.index_of(id)).ok_or(EngineError::NoCovariance(id, "no such keyframe"))?;
-            if !model.joined[k] {
+            if !model.joined(k) {
                 return Err(EngineError::NoCovariance(id, "it has no edge to the map yet"));
             }
             slots.push(k);

@@ -369,7 +369,7 @@ impl<P: EnginePose> Engine<P> {
             resolves: self.stats.resolves,
             keyframes: m.graph.keyframes(),
             timestamps: &self.timestamps,
-            joined: &m.joined,
+            states: &m.keyframes,
             poses: self.state.estimate(),
             georef: self.state.georef(),
             origin: self.gps_origin(),

@@ -66,6 +66,15 @@ impl EdgeState {
     }
 }
 
+/// What the engine holds of one keyframe.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct KeyframeState {
+    /// Linked to the gauge keyframe through applied edges: in the estimate.
+    pub joined: bool,
+    /// The applied edges at it.
+    pub incident: Vec<u32>,
+}
+
 /// The graph and its bookkeeping, without the solvers.
 #[derive(Clone, Debug, Default)]
 pub struct Model<P: EnginePose = Pose2> {
@@ -73,12 +82,10 @@ pub struct Model<P: EnginePose = Pose2> {
     pub graph: PoseGraph<P>,
     /// What the engine holds of each edge, by index.
     pub edges: Vec<EdgeState>,
-    /// Whether each keyframe has joined (is linked to the gauge).
-    pub joined: Vec<bool>,
+    /// What the engine holds of each keyframe, by index.
+    pub keyframes: Vec<KeyframeState>,
     /// Edges waiting for a keyframe to join, by keyframe.
     pub waiting: HashMap<usize, Vec<usize>>,
-    /// Applied edges by keyframe.
-    pub incident: Vec<Vec<u32>>,
     /// Edges received but not yet connected to the solvers (that happens at
     /// the next solve, odometry first).
     pub unconnected: Vec<usize>,
@@ -105,6 +112,16 @@ impl<P: EnginePose> Model<P> {
     /// the switch is off ([`OFF_BELOW`]).
     pub fn weight(&self, e: usize) -> f64 {
         self.edges[e].weight()
+    }
+
+    /// Whether keyframe `k` has joined the estimate.
+    pub fn joined(&self, k: usize) -> bool {
+        self.keyframes[k].joined
+    }
+
+    /// Whether each keyframe has joined, by index.
+    pub fn joined_flags(&self) -> Vec<bool> {
+        self.keyframes.iter().map(|k| k.joined).collect()
     }
 
     /// Edge `e` waits for keyframe `k` to join (once).
@@ -149,7 +166,7 @@ impl<P: EnginePose> Model<P> {
     /// The joined keyframes (gauge first) and the compact index of every
     /// keyframe among them (`usize::MAX` where not joined).
     pub(super) fn compact_joined(&self) -> (Vec<usize>, Vec<usize>) {
-        let joined: Vec<usize> = (0..self.graph.len()).filter(|&k| self.joined[k]).collect();
+        let joined: Vec<usize> = (0..self.graph.len()).filter(|&k| self.joined(k)).collect();
         let mut compact = vec![usize::MAX; self.graph.len()];
         for (c, &k) in joined.iter().enumerate() {
             compact[k] = c;
@@ -315,7 +332,7 @@ impl<P: EnginePose> Model<P> {
         params: &LevenbergMarquardtParams,
     ) {
         let fixes: Vec<GpsFix> = (self.fixes.iter())
-            .filter(|f| self.joined[f.keyframe])
+            .filter(|f| self.joined(f.keyframe))
             .map(|f| GpsFix {
                 keyframe: compact[f.keyframe],
                 ..*f
@@ -351,19 +368,19 @@ impl<P: EnginePose> Model<P> {
                 }
             }
             let lonely: Vec<usize> = (1..self.graph.len())
-                .filter(|&k| self.joined[k] && degree[k] == 0)
+                .filter(|&k| self.joined(k) && degree[k] == 0)
                 .collect();
             if lonely.is_empty() {
                 return;
             }
             for k in lonely {
-                self.joined[k] = false;
-                for e in std::mem::take(&mut self.incident[k]) {
+                self.keyframes[k].joined = false;
+                for e in std::mem::take(&mut self.keyframes[k].incident) {
                     let e = e as usize;
                     self.edges[e].applied = false;
                     let edge = self.graph.edges()[e];
                     let other = if edge.from == k { edge.to } else { edge.from };
-                    self.incident[other].retain(|&x| x as usize != e);
+                    self.keyframes[other].incident.retain(|&x| x as usize != e);
                     for end in [k, other] {
                         self.waiting.entry(end).or_default().push(e);
                     }

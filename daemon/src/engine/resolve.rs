@@ -158,7 +158,7 @@ pub fn run<P: EnginePose>(
 ) -> Option<Outcome<P>> {
     let start = Instant::now();
     let _span = tracing::debug_span!("resolve", keyframes = model.graph.len(), ?polish).entered();
-    let joined = model.joined.clone();
+    let joined = model.joined_flags();
     let lin = rebuild::polish_model(&mut model, estimate, polish, config, stop);
     if stop.load(Ordering::Relaxed) {
         tracing::debug!(seconds = start.elapsed().as_secs_f64(), "Re-solve stopped.");
@@ -173,7 +173,7 @@ pub fn run<P: EnginePose>(
         // is queued; the foreground replays what comes after. A replayed
         // op costs about what it cost the foreground, so chasing the queue
         // to empty need never end while input keeps coming
-        s.set_hints(estimate, &joined);
+        s.set_hints(estimate, joined.iter().copied());
         for _ in 0..CATCH_UP_PASSES {
             let queued = ops.len();
             if queued == 0 {

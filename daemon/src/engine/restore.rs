@@ -14,7 +14,7 @@
 //! first ([`rebuild`]).
 
 use super::judge;
-use super::model::{EdgeState, Model};
+use super::model::{EdgeState, KeyframeState, Model};
 use super::op::Polish;
 use super::rebuild::{factorise, rebuild};
 use super::state::State;
@@ -41,8 +41,7 @@ pub(super) fn state_of<P: EnginePose>(
     let mut lin = Vec::with_capacity(map.keyframes.len());
     for k in &map.keyframes {
         model.graph.add_keyframe(k.id, k.guess)?;
-        model.joined.push(false);
-        model.incident.push(Vec::new());
+        model.keyframes.push(KeyframeState::default());
         lin.push(k.lin);
     }
     for e in &map.edges {
@@ -89,13 +88,13 @@ fn join<P: EnginePose>(model: &mut Model<P>, lin: &mut [P], map: &MapFile<P>) {
     }
     let adjacency = model.graph.adjacency();
     let mut queue = VecDeque::from([0]);
-    model.joined[0] = true;
+    model.keyframes[0].joined = true;
     while let Some(m) = queue.pop_front() {
         for &(k, e) in &adjacency[m] {
-            if model.joined[k] || model.edges[e].weight() == 0.0 {
+            if model.joined(k) || model.edges[e].weight() == 0.0 {
                 continue;
             }
-            model.joined[k] = true;
+            model.keyframes[k].joined = true;
             if !map.keyframes[k].joined {
                 let edge = &model.graph.edges()[e];
                 let rel = if edge.from == m {
@@ -112,11 +111,11 @@ fn join<P: EnginePose>(model: &mut Model<P>, lin: &mut [P], map: &MapFile<P>) {
     }
     for e in 0..model.graph.edges().len() {
         let (i, j) = (model.graph.edges()[e].from, model.graph.edges()[e].to);
-        match (model.joined[i], model.joined[j]) {
+        match (model.joined(i), model.joined(j)) {
             (true, true) => {
                 model.edges[e].applied = true;
-                model.incident[i].push(e as u32);
-                model.incident[j].push(e as u32);
+                model.keyframes[i].incident.push(e as u32);
+                model.keyframes[j].incident.push(e as u32);
             }
             (ji, jj) => {
                 if !ji {
@@ -163,7 +162,7 @@ pub(super) fn map_of<P: EnginePose>(
             guess: kf.guess,
             estimate: estimate[k],
             lin: lin.get(k).copied().unwrap_or(estimate[k]),
-            joined: m.joined[k],
+            joined: m.joined(k),
             timestamp_ns: timestamps.get(k).copied().unwrap_or(0),
         })
         .collect();

@@ -1,5 +1,6 @@
 //! [`Snapshot`]: the estimate the engine publishes after each update.
 
+use super::model::KeyframeState;
 use crate::geometry::Pose2;
 use crate::gps::{Geodetic, Georef};
 use crate::graph::{Keyframe, KeyframeId, RigidMotion};
@@ -16,7 +17,7 @@ pub struct Snapshot<'a, P: RigidMotion = Pose2> {
     pub resolves: usize,
     pub(super) keyframes: &'a [Keyframe<P>],
     pub(super) timestamps: &'a [u64],
-    pub(super) joined: &'a [bool],
+    pub(super) states: &'a [KeyframeState],
     pub(super) poses: &'a [P],
     /// The map→ENU motion, once two GPS fixes have georeferenced the map.
     pub georef: Option<Georef>,
@@ -30,35 +31,37 @@ pub struct Snapshot<'a, P: RigidMotion = Pose2> {
 impl<'a, P: RigidMotion> Snapshot<'a, P> {
     /// `(id, pose)` of every keyframe in the estimate, in arrival order.
     pub fn poses(&self) -> impl Iterator<Item = (KeyframeId, P)> + 'a {
-        let (k, j, p) = (self.keyframes, self.joined, self.poses);
-        (0..k.len()).filter(move |&i| j[i]).map(move |i| (k[i].id, p[i]))
+        let (k, s, p) = (self.keyframes, self.states, self.poses);
+        (0..k.len())
+            .filter(move |&i| s[i].joined)
+            .map(move |i| (k[i].id, p[i]))
     }
 
     /// The timestamp (ns; 0: none) of each keyframe [`Self::poses`] yields,
     /// in the same order.
     pub fn timestamps(&self) -> impl Iterator<Item = u64> + 'a {
-        let (t, j) = (self.timestamps, self.joined);
-        (0..j.len())
-            .filter(move |&i| j[i])
+        let (t, s) = (self.timestamps, self.states);
+        (0..s.len())
+            .filter(move |&i| s[i].joined)
             .map(move |i| t.get(i).copied().unwrap_or(0))
     }
 
     /// The newest keyframe in the estimate.
     pub fn newest(&self) -> Option<KeyframeId> {
-        (0..self.joined.len())
+        (0..self.states.len())
             .rev()
-            .find(|&i| self.joined[i])
+            .find(|&i| self.states[i].joined)
             .map(|i| self.keyframes[i].id)
     }
 
     /// The pose of one keyframe, if it is in the estimate.
     pub fn pose(&self, index: usize) -> Option<P> {
-        (index < self.joined.len() && self.joined[index]).then(|| self.poses[index])
+        (self.states.get(index).is_some_and(|s| s.joined)).then(|| self.poses[index])
     }
 
     /// Number of keyframes in the estimate.
     pub fn len(&self) -> usize {
-        self.joined.iter().filter(|&&j| j).count()
+        self.states.iter().filter(|s| s.joined).count()
     }
 
     /// True when no keyframe is in the estimate.

@@ -8,7 +8,7 @@
 use super::arrival::{ArrivalGate, Verdict};
 use super::chi2::Chi2Cache;
 use super::gauss_newton::GaussNewton;
-pub use super::model::{EdgeState, Model};
+pub use super::model::{EdgeState, KeyframeState, Model};
 pub use super::op::{Op, Polish};
 use super::pose::EnginePose;
 use super::report::FactorWork;
@@ -91,9 +91,9 @@ impl<P: EnginePose> State<P> {
     /// anchor `m` takes the foreground's relative pose `F_m⁻¹ F_k`, so the
     /// new part of the map arrives in the shape the foreground's solves
     /// gave it (its loop closures applied) rather than dead-reckoned.
-    pub fn set_hints(&mut self, estimate: &[P], joined: &[bool]) {
+    pub fn set_hints(&mut self, estimate: &[P], joined: impl IntoIterator<Item = bool>) {
         self.hint = (estimate.iter().zip(joined))
-            .map(|(&p, &j)| j.then_some(p))
+            .map(|(&p, j)| j.then_some(p))
             .collect();
     }
 
@@ -137,14 +137,13 @@ impl<P: EnginePose> State<P> {
         match op {
             Op::Keyframe { id, guess } => {
                 let k = self.model.graph.add_keyframe(*id, *guess)?;
-                self.model.joined.push(false);
-                self.model.incident.push(Vec::new());
+                self.model.keyframes.push(KeyframeState::default());
                 let gauge = guess.unwrap_or(P::IDENTITY);
                 self.estimate.push(gauge);
                 if k == 0 {
                     // keyframe 0 fixes the gauge where it is
                     self.gn = GaussNewton::new(gauge);
-                    self.model.joined[0] = true;
+                    self.model.keyframes[0].joined = true;
                 }
                 Ok(())
             }
@@ -183,7 +182,7 @@ impl<P: EnginePose> State<P> {
             return Ok(());
         }
         for f in 0..self.model.fixes.len() {
-            if self.model.fix_applied[f] || !self.model.joined[self.model.fixes[f].keyframe] {
+            if self.model.fix_applied[f] || !self.model.joined(self.model.fixes[f].keyframe) {
                 continue;
             }
             let prior = self.model.prior(f).expect("georeferenced");
@@ -196,7 +195,7 @@ impl<P: EnginePose> State<P> {
     /// Fixes on keyframes in the estimate.
     pub fn usable_fixes(&self) -> usize {
         let m = &self.model;
-        m.fixes.iter().filter(|f| m.joined[f.keyframe]).count()
+        m.fixes.iter().filter(|f| m.joined(f.keyframe)).count()
     }
 
     /// The map→ENU motion, once fitted.
@@ -312,7 +311,7 @@ impl<P: EnginePose> State<P> {
             }
             let edge = self.model.graph.edges()[e];
             let (i, j) = (edge.from, edge.to);
-            match (self.model.joined[i], self.model.joined[j]) {
+            match (self.model.joined(i), self.model.joined(j)) {
                 (true, true) => {
                     // a new loop closure between mapped keyframes enters
                     // with the switch its error has now
@@ -330,12 +329,12 @@ impl<P: EnginePose> State<P> {
                 (true, false) | (false, true) if self.model.weight(e) == 0.0 => {
                     // an edge switched off, removed or held constrains
                     // nothing: it cannot join a keyframe
-                    let k = if self.model.joined[i] { j } else { i };
+                    let k = if self.model.joined(i) { j } else { i };
                     self.model.wait_for(k, e);
                     continue;
                 }
                 (true, false) | (false, true) => {
-                    let (m, k) = if self.model.joined[i] { (i, j) } else { (j, i) };
+                    let (m, k) = if self.model.joined(i) { (i, j) } else { (j, i) };
                     let rel = if m == i {
                         edge.measurement
                     } else {
@@ -354,8 +353,8 @@ impl<P: EnginePose> State<P> {
                 }
             }
             self.model.edges[e].applied = true;
-            self.model.incident[i].push(e as u32);
-            self.model.incident[j].push(e as u32);
+            self.model.keyframes[i].incident.push(e as u32);
+            self.model.keyframes[j].incident.push(e as u32);
             let s = self.model.weight(e);
             if s != 0.0 {
                 self.contribute(e, s)?;
@@ -425,7 +424,7 @@ impl<P: EnginePose> State<P> {
         let edges = (0..m.edges.len())
             .filter(|&e| m.edges[e].applied && m.weight(e) > 0.0)
             .count();
-        let keyframes = m.joined.iter().filter(|&&j| j).count();
+        let keyframes = m.keyframes.iter().filter(|k| k.joined).count();
         let dof = P::DOF as i64;
         let r = dof * edges as i64 - dof * (keyframes as i64 - 1);
         if r < 30 {
@@ -437,7 +436,7 @@ impl<P: EnginePose> State<P> {
 
     /// Keyframe `k` joins the map at `guess`.
     fn join(&mut self, k: usize, guess: P) {
-        self.model.joined[k] = true;
+        self.model.keyframes[k].joined = true;
         self.estimate[k] = guess;
         self.gn.add_keyframe(k, guess);
     }
@@ -497,9 +496,9 @@ impl<P: EnginePose> State<P> {
     /// rebuild to start from (the solvers and the cached χ² are left as
     /// they were: only a rebuild may follow).
     pub fn start_from(&mut self, start: &[P]) {
-        let joined = self.model.joined.iter().zip(&mut self.estimate);
-        for ((&j, x), s) in joined.zip(start) {
-            if j {
+        let joined = self.model.keyframes.iter().zip(&mut self.estimate);
+        for ((kf, x), s) in joined.zip(start) {
+            if kf.joined {
                 *x = *s;
             }
         }
@@ -585,7 +584,7 @@ pub(super) mod tests {
         // 2 away from the odometry
         let f1 = Pose2::new(5.0, -2.0, 0.7);
         let relative = Pose2::new(0.5, 0.2, 0.1);
-        hinted.set_hints(&[Pose2::IDENTITY, f1], &[true, true]);
+        hinted.set_hints(&[Pose2::IDENTITY, f1], [true, true]);
         hinted.hint(2, f1.compose(&relative));
         for state in [&mut plain, &mut hinted] {
             state.replay(&keyframe(2), 0.0).unwrap();
