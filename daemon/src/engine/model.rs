@@ -75,6 +75,15 @@ pub struct KeyframeState {
     pub incident: Vec<u32>,
 }
 
+/// What the engine holds of one GPS fix.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FixState {
+    /// The fix, in the local ENU frame.
+    pub fix: GpsFix,
+    /// Its prior is in the Gauss–Newton system.
+    pub applied: bool,
+}
+
 /// The graph and its bookkeeping, without the solvers.
 #[derive(Clone, Debug, Default)]
 pub struct Model<P: EnginePose = Pose2> {
@@ -90,9 +99,7 @@ pub struct Model<P: EnginePose = Pose2> {
     /// the next solve, odometry first).
     pub unconnected: Vec<usize>,
     /// GPS fixes, in arrival order.
-    pub fixes: Vec<GpsFix>,
-    /// Whether each fix's prior is in the solver.
-    pub fix_applied: Vec<bool>,
+    pub fixes: Vec<FixState>,
     /// The map→ENU motion of the last re-solve (with two or more fixes).
     pub georef: Option<Georef>,
     /// The weight of every GPS prior (the graph's variance factor).
@@ -135,7 +142,7 @@ impl<P: EnginePose> Model<P> {
     /// The prior of fix `f` under the current georeference.
     pub(super) fn prior(&self, f: usize) -> Option<PositionPrior<P>> {
         let g = self.georef.as_ref()?;
-        Some(P::gps_prior(&self.fixes[f], g, self.gps_weight))
+        Some(P::gps_prior(&self.fixes[f].fix, g, self.gps_weight))
     }
 }
 
@@ -332,10 +339,10 @@ impl<P: EnginePose> Model<P> {
         params: &LevenbergMarquardtParams,
     ) {
         let fixes: Vec<GpsFix> = (self.fixes.iter())
-            .filter(|f| self.joined(f.keyframe))
+            .filter(|f| self.joined(f.fix.keyframe))
             .map(|f| GpsFix {
-                keyframe: compact[f.keyframe],
-                ..*f
+                keyframe: compact[f.fix.keyframe],
+                ..f.fix
             })
             .collect();
         if !config.absolute || fixes.len() < 2 {

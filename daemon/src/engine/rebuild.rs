@@ -74,9 +74,9 @@ pub fn factorise<P: EnginePose>(
     // every fix on a joined keyframe enters the fresh factor
     let mut priors = Vec::new();
     for f in 0..model.fixes.len() {
-        let on = model.joined(model.fixes[f].keyframe);
+        let on = model.joined(model.fixes[f].fix.keyframe);
         let prior = if on { model.prior(f) } else { None };
-        model.fix_applied[f] = prior.is_some();
+        model.fixes[f].applied = prior.is_some();
         priors.extend(prior);
     }
     // elimination order over joined keyframes except the gauge

@@ -14,7 +14,7 @@
 //! first ([`rebuild`]).
 
 use super::judge;
-use super::model::{EdgeState, KeyframeState, Model};
+use super::model::{EdgeState, FixState, KeyframeState, Model};
 use super::op::Polish;
 use super::rebuild::{factorise, rebuild};
 use super::state::State;
@@ -62,8 +62,8 @@ pub(super) fn state_of<P: EnginePose>(
     }
     join(&mut model, &mut lin, map);
     for f in &map.fixes {
-        model.fixes.push(fix_of(f, &model, frame)?);
-        model.fix_applied.push(false);
+        let fix = fix_of(f, &model, frame)?;
+        model.fixes.push(FixState { fix, applied: false });
     }
     if let Some(g) = map.georef {
         model.georef = Some(g.georef);

@@ -8,7 +8,7 @@
 use super::arrival::{ArrivalGate, Verdict};
 use super::chi2::Chi2Cache;
 use super::gauss_newton::GaussNewton;
-pub use super::model::{EdgeState, KeyframeState, Model};
+pub use super::model::{EdgeState, FixState, KeyframeState, Model};
 pub use super::op::{Op, Polish};
 use super::pose::EnginePose;
 use super::report::FactorWork;
@@ -166,8 +166,10 @@ impl<P: EnginePose> State<P> {
                 if fix.keyframe >= self.model.graph.len() {
                     return Err(EngineError::FixKeyframe(fix.keyframe as KeyframeId));
                 }
-                self.model.fixes.push(*fix);
-                self.model.fix_applied.push(false);
+                self.model.fixes.push(FixState {
+                    fix: *fix,
+                    applied: false,
+                });
                 Ok(())
             }
             Op::Weight { edge, scale } => self.reweight(*edge, *scale),
@@ -182,11 +184,12 @@ impl<P: EnginePose> State<P> {
             return Ok(());
         }
         for f in 0..self.model.fixes.len() {
-            if self.model.fix_applied[f] || !self.model.joined(self.model.fixes[f].keyframe) {
+            let FixState { fix, applied } = self.model.fixes[f];
+            if applied || !self.model.joined(fix.keyframe) {
                 continue;
             }
             let prior = self.model.prior(f).expect("georeferenced");
-            self.model.fix_applied[f] = true;
+            self.model.fixes[f].applied = true;
             self.gn.apply_prior(&prior).map_err(EngineError::Numeric)?;
         }
         Ok(())
@@ -195,7 +198,7 @@ impl<P: EnginePose> State<P> {
     /// Fixes on keyframes in the estimate.
     pub fn usable_fixes(&self) -> usize {
         let m = &self.model;
-        m.fixes.iter().filter(|f| m.joined(f.keyframe)).count()
+        m.fixes.iter().filter(|f| m.joined(f.fix.keyframe)).count()
     }
 
     /// The map→ENU motion, once fitted.
