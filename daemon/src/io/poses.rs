@@ -75,12 +75,7 @@ impl TruthPose for Pose2 {
             let poses = graph
                 .compose_spanning_tree()
                 .map_err(|e| ReadError::graph(path, e))?;
-            Ok(graph
-                .keyframes()
-                .iter()
-                .zip(poses)
-                .map(|(k, p)| (k.id, p))
-                .collect())
+            Ok(by_id(&graph, poses))
         } else {
             parse_pose_table(path, &text)
         }
@@ -91,13 +86,18 @@ impl TruthPose for Pose3 {
     fn read_ground_truth(path: &Path) -> Result<HashMap<KeyframeId, Pose3>, ReadError> {
         let graph = super::read_graph3(path)?;
         let poses = graph.initial_guess().map_err(|e| ReadError::graph(path, e))?;
-        Ok(graph
-            .keyframes()
-            .iter()
-            .zip(poses)
-            .map(|(k, p)| (k.id, p))
-            .collect())
+        Ok(by_id(&graph, poses))
     }
+}
+
+/// `poses` (indexed like `graph`'s keyframes) keyed by keyframe id.
+fn by_id<P: RigidMotion>(graph: &crate::graph::PoseGraph<P>, poses: Vec<P>) -> HashMap<KeyframeId, P> {
+    graph
+        .keyframes()
+        .iter()
+        .zip(poses)
+        .map(|(k, p)| (k.id, p))
+        .collect()
 }
 
 #[cfg(test)]
