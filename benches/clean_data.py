@@ -17,7 +17,6 @@ import glob, os, subprocess, sys, tempfile
 from common import BIN, DATA, slamd
 
 
-
 def main():
     tmp = tempfile.mkdtemp(prefix="slamd-clean-")
     files = sys.argv[1:] or sorted(glob.glob(os.path.join(DATA, "*.g2o")) + glob.glob(os.path.join(DATA, "*.graph")))

@@ -17,7 +17,6 @@ import argparse, json, os, random, signal, subprocess, sys, tempfile, time
 from common import BIN, DATA
 
 
-
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("file", nargs="?", default="city10000.g2o")

@@ -26,7 +26,6 @@ import slamd
 from common import BIN, DATA
 
 
-
 def steps(graph):
     """Per keyframe (file order): its id and the edges whose newer end it is."""
     index = {int(k): i for i, k in enumerate(graph.ids)}

@@ -19,7 +19,6 @@ import argparse, json, os, re, signal, subprocess, sys, tempfile, time
 from common import BIN
 
 
-
 def peak_rss(time_report):
     """Peak RSS in MiB from what `/usr/bin/time -v` wrote."""
     rss = re.search(r"Maximum resident set size \(kbytes\): (\d+)", time_report)
