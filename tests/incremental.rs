@@ -312,3 +312,29 @@ fn a_factor_refactorised_while_a_resolve_runs_still_reaches_the_optimum() {
         "no refactorisation while the re-solve ran"
     );
 }
+
+/// The first keyframe fixes the gauge at its guess: it is published there
+/// before any edge and after, and the keyframe after it one odometry step
+/// away.
+#[test]
+fn the_first_keyframe_stays_at_its_guess() {
+    let mut engine = Engine::new(EngineConfig {
+        background: false,
+        ..EngineConfig::default()
+    });
+    let start = Pose2::new(5.0, -3.0, 0.5);
+    let step = Pose2::new(1.0, 0.0, 0.2);
+    engine.add_keyframe(7, Some(start)).unwrap();
+    engine.update();
+    assert_eq!(engine.snapshot().poses().collect::<Vec<_>>(), vec![(7, start)]);
+    engine.add_keyframe(8, None).unwrap();
+    let odometry = EdgeInput::new(7, 8, step, Information::identity(), EdgeKind::Odometry);
+    engine.add_edge(odometry).unwrap();
+    engine.update();
+    let poses: Vec<_> = engine.snapshot().poses().collect();
+    assert_eq!(poses.len(), 2);
+    assert_eq!(poses[0], (7, start));
+    assert_eq!(poses[1].0, 8);
+    let error = max_pose_error(&[poses[1].1], &[start.compose(&step)]);
+    assert!(error < 1e-12, "{error:e}");
+}

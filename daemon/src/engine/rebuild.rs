@@ -88,7 +88,8 @@ pub fn factorise<P: EnginePose>(
     let perm = amd_newest_last(joined.len().saturating_sub(1), pairs, recent);
     let order: Vec<usize> = perm.iter().map(|&c| joined[c + 1]).collect();
     let gn = GaussNewton::build(&model.graph, &active, &priors, lin, &order)?;
-    Ok(State::assemble(config, model, gn))
+    let estimate = gn.estimate().to_vec();
+    Ok(State::assemble(config, model, gn, estimate))
 }
 
 #[cfg(test)]

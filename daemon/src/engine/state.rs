@@ -43,14 +43,22 @@ impl<P: EnginePose> State<P> {
 
     /// An empty state.
     pub fn new(config: &EngineConfig) -> Self {
-        Self::assemble(config, Model::default(), GaussNewton::new(P::IDENTITY))
+        Self::assemble(
+            config,
+            Model::default(),
+            GaussNewton::new(P::IDENTITY),
+            Vec::new(),
+        )
     }
 
-    /// A state over `model` with this Gauss–Newton system, whose estimate
-    /// it takes; the bookkeeping starts fresh and the cached χ² is
-    /// computed.
-    pub(super) fn assemble(config: &EngineConfig, model: Model<P>, gn: GaussNewton<P>) -> Self {
-        let estimate = gn.estimate().to_vec();
+    /// A state over `model` with this Gauss–Newton system and estimate;
+    /// the bookkeeping starts fresh and the cached χ² is computed.
+    pub(super) fn assemble(
+        config: &EngineConfig,
+        model: Model<P>,
+        gn: GaussNewton<P>,
+        estimate: Vec<P>,
+    ) -> Self {
         Self {
             chi2: Chi2Cache::new(&model, &estimate),
             model,
