@@ -69,10 +69,10 @@ pub const SAY_EVERY: Duration = Duration::from_secs(5);
 
 /// A wait for an acknowledgement, as it stands at one look: what
 /// [`Frontend::wait_acknowledged_with`] hands its caller between looks.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Waiting {
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Waiting<'a> {
     /// The daemon's namespace.
-    pub namespace: String,
+    pub namespace: &'a str,
     /// The message waited for.
     pub sequence: u64,
     /// How long the wait has lasted.
@@ -85,7 +85,7 @@ pub struct Waiting {
     pub say: bool,
 }
 
-impl std::fmt::Display for Waiting {
+impl std::fmt::Display for Waiting<'_> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         let why = if self.holding {
             "holds its acknowledgements: its journal cannot be written (a full disk?)".to_string()
@@ -330,13 +330,13 @@ impl Frontend {
 
     /// [`Self::wait_acknowledged`], calling `between` at every look (every
     /// 10 ms) with how the wait stands; `between` saying `false` ends the
-    /// wait with `false` (an interrupt), and it decides what to do with
-    /// [`Waiting::say`].
+    /// wait with `false` (an interrupt, or a caller's own bound on the
+    /// whole wait), and it decides what to do with [`Waiting::say`].
     pub fn wait_acknowledged_with(
         &mut self,
         sequence: u64,
         silence: Duration,
-        mut between: impl FnMut(&Waiting) -> bool,
+        mut between: impl FnMut(&Waiting<'_>) -> bool,
     ) -> Result<bool, TransportError> {
         if sequence > self.sequence {
             return Ok(false);
@@ -359,7 +359,7 @@ impl Frontend {
                 said = Some(Instant::now());
             }
             let w = Waiting {
-                namespace: self.endpoint.namespace.clone(),
+                namespace: &self.endpoint.namespace,
                 sequence,
                 waited,
                 holding: self.holding,
