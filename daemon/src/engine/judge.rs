@@ -358,7 +358,7 @@ impl<P: EnginePose> Engine<P> {
             }
             return;
         }
-        // the edges' terms join the solvers with the rebuild
+        // the edges' terms join the factor with the rebuild
         self.solve();
         if let Err(e) = self.state.set_switches_for_rebuild(&decisions) {
             tracing::error!(error = %e, "Cannot take a decision of the judge.");

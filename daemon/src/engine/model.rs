@@ -1,5 +1,5 @@
 //! [`Model`]: the graph and everything the engine knows about it besides
-//! the solvers: weights and switches, which keyframes joined, which edges
+//! the factor: weights and switches, which keyframes joined, which edges
 //! wait, GPS fixes and the georeference; and the re-solve's work on it
 //! (robust polish, georeferencing).
 
@@ -35,12 +35,12 @@ pub struct EdgeState {
     /// pairing) since the last multi-start re-solve, which gets a start
     /// without them.
     pub admitted: bool,
-    /// Its terms are in the solvers.
+    /// Its terms are in the factor.
     pub applied: bool,
 }
 
 impl EdgeState {
-    /// A new edge: weight 1, switched on, not yet in the solvers.
+    /// A new edge: weight 1, switched on, not yet in the factor.
     pub const NEW: EdgeState = EdgeState {
         scale: 1.0,
         switch: 1.0,
@@ -84,7 +84,7 @@ pub struct FixState {
     pub applied: bool,
 }
 
-/// The graph and its bookkeeping, without the solvers.
+/// The graph and its bookkeeping, without the factor.
 #[derive(Clone, Debug, Default)]
 pub struct Model<P: EnginePose = Pose2> {
     /// Keyframes in arrival order (index 0 is the gauge) and every edge.
@@ -95,7 +95,7 @@ pub struct Model<P: EnginePose = Pose2> {
     pub keyframes: Vec<KeyframeState>,
     /// Edges waiting for a keyframe to join, by keyframe.
     pub waiting: HashMap<usize, Vec<usize>>,
-    /// Edges received but not yet connected to the solvers (that happens at
+    /// Edges received but not yet connected to the factor (that happens at
     /// the next solve, odometry first).
     pub unconnected: Vec<usize>,
     /// GPS fixes, in arrival order.

@@ -256,7 +256,7 @@ impl<P: EnginePose> State<P> {
     }
 
     /// Sets many switches at once, leaving the factor behind for the
-    /// caller to rebuild: the terms of edges in the solvers are not
+    /// caller to rebuild: the terms of edges in the factor are not
     /// updated (one refactorisation costs less than many updates into an
     /// ordering that did not foresee them). Invalid decisions are skipped.
     pub fn set_switches_for_rebuild(&mut self, decisions: &[(usize, f64)]) -> Result<(), EngineError> {
@@ -277,7 +277,7 @@ impl<P: EnginePose> State<P> {
     }
 
     /// Applies `set` to edge `e`'s state and the change of its weight to
-    /// the solvers; an edge that waited while it weighed nothing connects.
+    /// the factor; an edge that waited while it weighed nothing connects.
     fn change(&mut self, e: usize, set: impl FnOnce(&mut EdgeState)) -> Result<(), EngineError> {
         let before = self.model.weight(e);
         set(&mut self.model.edges[e]);
@@ -413,7 +413,7 @@ impl<P: EnginePose> State<P> {
     }
 
     /// Switches on loop closure `m`, switched off on arrival: its terms
-    /// join the solvers at the estimate.
+    /// join the factor at the estimate.
     fn restore(&mut self, m: usize) -> Result<(), EngineError> {
         if !self.model.edges[m].applied || self.model.edges[m].switch >= OFF_BELOW {
             return Ok(());
@@ -504,7 +504,7 @@ impl<P: EnginePose> State<P> {
     }
 
     /// Replaces the estimate of the joined keyframes `start` covers, for a
-    /// rebuild to start from (the solvers and the cached χ² are left as
+    /// rebuild to start from (the factor and the cached χ² are left as
     /// they were: only a rebuild may follow).
     pub fn start_from(&mut self, start: &[P]) {
         let joined = self.model.keyframes.iter().zip(&mut self.estimate);
