@@ -3,7 +3,7 @@
 use super::services::{self, Access, Namespace};
 use super::{node, TransportError};
 use crate::message::{DaemonStatus, Pose, Rejection, SnapshotHeader, Switch, SwitchesHeader};
-use iceoryx2::port::listener::Listener;
+use iceoryx2::port::listener::{Listener, ListenerWaitError};
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
 use iceoryx2::sample::Sample;
@@ -108,9 +108,10 @@ impl SnapshotLink {
         Ok(newest)
     }
 
-    /// Waits up to `timeout` for a snapshot newer than the last one taken.
-    /// The event wakes it for every new snapshot; it also looks every
-    /// 50 ms for the latest snapshot, which a daemon at rest hands a new
+    /// Waits up to `timeout` for a snapshot newer than the last one taken;
+    /// `None` when none came, or when a signal cut the wait short. The
+    /// event wakes it for every new snapshot; it also looks every 50 ms
+    /// for the latest snapshot, which a daemon at rest hands a new
     /// subscriber without an event.
     pub fn wait(&self, timeout: Duration) -> Result<Option<SnapshotSample>, TransportError> {
         let deadline = Instant::now() + timeout;
@@ -124,9 +125,13 @@ impl SnapshotLink {
             if left < MIN_WAIT {
                 return Ok(None);
             }
-            self.published
-                .timed_wait(|_| {}, left.min(LOOK_EVERY))
-                .map_err(|e| TransportError::other("wait for a snapshot", e))?;
+            match self.published.timed_wait(|_| {}, left.min(LOOK_EVERY)) {
+                Ok(_) => {}
+                // a signal cut the wait short: the caller decides what it
+                // means (its own handler has run)
+                Err(ListenerWaitError::InterruptSignal) => return Ok(None),
+                Err(e) => return Err(TransportError::other("wait for a snapshot", e)),
+            }
         }
     }
 
