@@ -10,12 +10,15 @@
 //! every edge carries the matching information. The city's side grows with
 //! √poses so that revisits stay frequent at any size (tests use hundreds of
 //! poses, scale benchmarks up to 1,000,000). In 3-D ([`generate3`]) the same
-//! drive climbs a building, a floor at a time.
+//! drive climbs a building, a floor at a time. [`gps_fixes`] places a
+//! world on the globe and takes noisy GPS fixes of its true positions.
 
 use crate::geometry::Pose2;
+use crate::gps::{Geodetic, LocalFrame};
 use crate::graph::{EdgeKind, Information, Information6, Pose3, PoseGraph, RigidMotion};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
+use slamd_types::{FixInput, KeyframeId};
 use std::collections::HashMap;
 use std::f64::consts::FRAC_PI_2;
 
@@ -246,6 +249,64 @@ pub fn generate3(params: &WorldParams, storeys: usize) -> World3 {
     World3 { graph, truth }
 }
 
+/// Where a synthetic world lies on the globe and how its GPS is taken.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GpsParams {
+    /// The map frame's origin.
+    pub origin: Geodetic,
+    /// The heading of the map's x axis, counter-clockwise from east (rad).
+    pub heading: f64,
+    /// A fix at every `every`-th keyframe.
+    pub every: usize,
+    /// Noise σ of east, north and height (m).
+    pub sigma: f64,
+    /// RNG seed of the noise.
+    pub seed: u64,
+}
+
+impl Default for GpsParams {
+    fn default() -> Self {
+        Self {
+            origin: Geodetic {
+                lat: 45.5026,
+                lon: 9.1566,
+                height: 130.0,
+            },
+            heading: 0.5,
+            every: 10,
+            sigma: 1.5,
+            seed: 1,
+        }
+    }
+}
+
+/// GPS fixes of every [`GpsParams::every`]-th of `positions` (a keyframe
+/// and its true map-frame `(x, y, z)`): the position turned by the heading
+/// into east-north-up at the origin, plus Gaussian noise of σ on each
+/// axis, as WGS84 with that covariance.
+pub fn gps_fixes(
+    positions: impl IntoIterator<Item = (KeyframeId, [f64; 3])>,
+    p: &GpsParams,
+) -> Vec<FixInput> {
+    let mut rng = ChaCha8Rng::seed_from_u64(p.seed);
+    let frame = LocalFrame::new(p.origin);
+    let (s, c) = p.heading.sin_cos();
+    let var = p.sigma * p.sigma;
+    (positions.into_iter().step_by(p.every.max(1)))
+        .map(|(keyframe, [x, y, z])| {
+            let east = c * x - s * y + p.sigma * gaussian(&mut rng);
+            let north = s * x + c * y + p.sigma * gaussian(&mut rng);
+            let up = z + p.sigma * gaussian(&mut rng);
+            FixInput {
+                keyframe,
+                position: frame.to_geodetic(east, north, up),
+                covariance: [var, 0.0, 0.0, var],
+                height_variance: Some(var),
+            }
+        })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -325,5 +386,30 @@ mod tests {
         }
         // edges are in time order
         assert!(w.graph.edges().windows(2).all(|e| e[0].newer() <= e[1].newer()));
+    }
+
+    #[test]
+    fn gps_fixes_lie_at_the_turned_truth_within_their_noise() {
+        let p = GpsParams::default();
+        let truth: Vec<(KeyframeId, [f64; 3])> =
+            (0..95).map(|i| (i, [i as f64, 0.5 * i as f64, 2.0])).collect();
+        let fixes = gps_fixes(truth.iter().copied(), &p);
+        assert_eq!(fixes.len(), 10, "keyframes 0, 10, …, 90");
+        let frame = LocalFrame::new(p.origin);
+        let (s, c) = p.heading.sin_cos();
+        let mut sum_sq = 0.0;
+        for (f, (k, [x, y, z])) in fixes.iter().zip(truth.iter().step_by(10)) {
+            assert_eq!(f.keyframe, *k);
+            let (e, n, u) = frame.to_enu(&f.position);
+            let d = [e - (c * x - s * y), n - (s * x + c * y), u - z];
+            assert!(d.iter().all(|v| v.abs() < 5.0 * p.sigma), "{d:?}");
+            sum_sq += d.iter().map(|v| v * v).sum::<f64>();
+            assert_eq!(f.covariance, [2.25, 0.0, 0.0, 2.25]);
+        }
+        let rms = (sum_sq / 30.0).sqrt();
+        assert!(
+            rms > 0.5 * p.sigma && rms < 1.5 * p.sigma,
+            "noise of σ: rms {rms}"
+        );
     }
 }
