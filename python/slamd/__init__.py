@@ -23,6 +23,7 @@ from ._slamd import (
     Snapshot,
     Snapshots,
     Solution,
+    Switches,
     read,
     solve,
 )
@@ -35,6 +36,7 @@ __all__ = [
     "Snapshot",
     "Snapshots",
     "Solution",
+    "Switches",
     "read",
     "solve",
 ]

@@ -211,8 +211,52 @@ fn daemon_snapshot(py: Python<'_>, s: &slamd_protocol::transport::SnapshotSample
     })
 }
 
+/// The outlier filter's state of every loop closure, as the daemon last
+/// published it (it does when one arrives or is decided).
+#[pyclass(module = "slamd", frozen, get_all)]
+pub struct Switches {
+    /// The snapshot version these weights belong to.
+    pub version: u64,
+    /// One row `(from, to)` of keyframe ids per loop closure, in arrival
+    /// order.
+    pub edges: Py<numpy::PyArray2<u64>>,
+    /// Each one's switch `s ∈ [0, 1]` (its information counts `s²` times).
+    pub weights: Py<numpy::PyArray1<f64>>,
+    /// Each one's state: `"kept"`, `"off"` (decided wrong: weight below
+    /// 0.5) or `"pending"` (not decided, held out of the estimate).
+    pub states: Vec<&'static str>,
+}
+
+fn daemon_switches(py: Python<'_>, s: &slamd_protocol::transport::SwitchesSample) -> PyResult<Switches> {
+    use numpy::{PyArray1, PyArrayMethods};
+    let all = s.switches();
+    let edges =
+        PyArray1::from_vec(py, all.iter().flat_map(|w| [w.from, w.to]).collect()).reshape([all.len(), 2])?;
+    let state =
+        |w: &slamd_protocol::Switch| match (w.pending != 0, w.weight < slamd::outliers::REJECTED_BELOW) {
+            (true, _) => "pending",
+            (false, true) => "off",
+            (false, false) => "kept",
+        };
+    Ok(Switches {
+        version: s.header().version,
+        edges: edges.unbind(),
+        weights: PyArray1::from_vec(py, all.iter().map(|w| w.weight).collect()).unbind(),
+        states: all.iter().map(state).collect(),
+    })
+}
+
 #[pymethods]
 impl Snapshots {
+    /// The newest loop-closure switches delivered since the last call, or
+    /// None (never blocks; a new `Snapshots` gets the last ones published).
+    fn switches(&self, py: Python<'_>) -> PyResult<Option<Switches>> {
+        match self.link.switches().map_err(error)? {
+            Some(s) => daemon_switches(py, &s).map(Some),
+            None => Ok(None),
+        }
+    }
+
     #[new]
     #[pyo3(signature = (namespace = "slamd"))]
     fn new(namespace: &str) -> PyResult<Self> {

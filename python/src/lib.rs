@@ -39,5 +39,6 @@ fn _slamd(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<engine::Snapshot>()?;
     m.add_class::<daemon::Frontend>()?;
     m.add_class::<daemon::Snapshots>()?;
+    m.add_class::<daemon::Switches>()?;
     Ok(())
 }

@@ -30,4 +30,6 @@ pub enum Command {
     Status(crate::status::StatusOpts),
     /// Keep every journal record that can be verified after corruption.
     Recover(crate::recover::RecoverOpts),
+    /// Watch a running daemon's map live: Foxglove, a page in any browser, an MCAP recording.
+    View(crate::view::ViewOpts),
 }

@@ -14,7 +14,7 @@ use slamd::eval::{aligned_onto, ate, Aligned};
 use slamd::geometry::Pose2;
 use slamd::graph::{chi2, KeyframeId, Pose3, PoseGraph};
 use slamd::io::{svg, AnyGraph, OnInvalid};
-use slamd::synthetic::{generate, generate3, WorldParams};
+use slamd::synthetic::{generate, generate3, gps_fixes, GpsParams, WorldParams};
 use std::collections::HashMap;
 use std::path::PathBuf;
 use std::process::{Child, Command, Stdio};
@@ -42,17 +42,33 @@ pub struct DemoOpts {
     /// Storeys of the 3-D building.
     #[arg(long, default_value_t = 3)]
     pub storeys: usize,
+    /// Serve the live view (`slamd view`: Foxglove on port 8765, the page
+    /// on 8766) while the world streams in, and keep it up until Ctrl-C.
+    #[arg(long)]
+    pub view: bool,
+    /// Record the live view's channels to this MCAP file.
+    #[arg(long)]
+    pub record: Option<PathBuf>,
+    /// Also stream GPS fixes of the synthetic world (one every 10
+    /// keyframes, σ = 1.5 m), so the map is georeferenced.
+    #[arg(long)]
+    pub gps: bool,
 }
 
 /// What the demo does per dimension.
 trait DemoPose: ReplayPose + slamd::graph::EdgeCost + Aligned {
     /// The pose seen from above.
     fn top(&self) -> Pose2;
+    /// Its position `(x, y, z)`.
+    fn position(&self) -> [f64; 3];
 }
 
 impl DemoPose for Pose2 {
     fn top(&self) -> Pose2 {
         *self
+    }
+    fn position(&self) -> [f64; 3] {
+        [self.x, self.y, 0.0]
     }
 }
 
@@ -60,25 +76,51 @@ impl DemoPose for Pose3 {
     fn top(&self) -> Pose2 {
         top_view(self)
     }
+    fn position(&self) -> [f64; 3] {
+        self.translation.into()
+    }
 }
 
-/// The daemon child process; stopped with SIGTERM when dropped.
+/// A child `slamd` process (the daemon, the viewer); stopped with
+/// SIGTERM when dropped.
 struct Daemon(Child);
 
 impl Daemon {
     fn start(namespace: &str, dimension: u32) -> anyhow::Result<Daemon> {
-        let exe = std::env::current_exe().context("locating the slamd binary")?;
-        let child = Command::new(exe)
-            .args(["run", "--namespace", namespace])
+        let child = Self::slamd(&["run", "--namespace", namespace])
             .env("SLAMD_DIMENSION", dimension.to_string())
+            .spawn()
+            .context("starting the daemon")?;
+        Ok(Daemon(child))
+    }
+
+    /// `slamd view` of `namespace`: on its default ports with `--view`,
+    /// on free ones without a page when it only records.
+    fn view(namespace: &str, opts: &DemoOpts) -> anyhow::Result<Option<Daemon>> {
+        if !opts.view && opts.record.is_none() {
+            return Ok(None);
+        }
+        let mut args: Vec<std::ffi::OsString> = vec!["view".into(), "--namespace".into(), namespace.into()];
+        if !opts.view {
+            args.extend(["--port", "0", "--no-page"].map(Into::into));
+        }
+        if let Some(path) = &opts.record {
+            args.extend(["--record".into(), path.into()]);
+        }
+        let child = Self::slamd(&args).spawn().context("starting the viewer")?;
+        Ok(Some(Daemon(child)))
+    }
+
+    fn slamd<S: AsRef<std::ffi::OsStr>>(args: &[S]) -> Command {
+        let exe = std::env::current_exe().unwrap_or_else(|_| "slamd".into());
+        let mut c = Command::new(exe);
+        c.args(args)
             .env(
                 "SLAMD_LOG",
                 std::env::var("SLAMD_LOG").unwrap_or_else(|_| "error".into()),
             )
-            .stdin(Stdio::null())
-            .spawn()
-            .context("starting the daemon")?;
-        Ok(Daemon(child))
+            .stdin(Stdio::null());
+        c
     }
 
     /// SIGTERM, then the exit status.
@@ -149,6 +191,7 @@ fn show<P: DemoPose>(
         P::DIMENSION
     );
     let daemon = Daemon::start(&namespace, P::DIMENSION)?;
+    let viewer = Daemon::view(&namespace, opts)?;
     let mut sink = connect(&namespace, &config, P::DIMENSION)?;
 
     println!(
@@ -160,10 +203,26 @@ fn show<P: DemoPose>(
         ProgressStyle::with_template("{bar:40} {pos}/{len} keyframes  {per_sec}  eta {eta}")
             .expect("valid template"),
     );
-    let out = replay(graph, &[], &mut sink, &[], false, |_| bar.inc(1))?;
+    let fixes = match (opts.gps, truth) {
+        (true, Some(t)) => {
+            let positions = graph.keyframes().iter().map(|k| (k.id, t[&k.id].position()));
+            gps_fixes(positions, &GpsParams::default())
+        }
+        (true, None) => {
+            anyhow::bail!("--gps takes its fixes from the synthetic world's truth: not with --dataset")
+        }
+        (false, _) => Vec::new(),
+    };
+    if !fixes.is_empty() {
+        println!(
+            "with {} GPS fixes (σ = {} m)",
+            fixes.len(),
+            GpsParams::default().sigma
+        );
+    }
+    let out = replay(graph, &fixes, &mut sink, &[], false, |_| bar.inc(1))?;
     bar.finish_and_clear();
     drop(sink);
-    let status = daemon.stop()?;
 
     let odometry = graph.compose_spanning_tree()?;
     let lat = Latency::of(out.latencies);
@@ -209,7 +268,24 @@ fn show<P: DemoPose>(
         _ => name.to_string(),
     };
     svg::write_svg(&opts.out, &title, &layers).map_err(anyhow::Error::msg)?;
-    println!("map written to {}; daemon stopped ({status})", opts.out.display());
+    println!("map written to {}", opts.out.display());
+    if let Some(viewer) = viewer {
+        if opts.view {
+            crate::signals::catch();
+            println!("the live view stays up until Ctrl-C");
+            while !crate::signals::stopped() {
+                crate::signals::sleep(Duration::from_secs(1));
+            }
+        } else {
+            // the viewer publishes at most every 100 ms: let it take the
+            // last snapshot and switches before it closes the recording
+            std::thread::sleep(Duration::from_millis(300));
+        }
+        let status = viewer.stop()?;
+        anyhow::ensure!(status.success(), "the viewer ended with {status}");
+    }
+    let status = daemon.stop()?;
+    println!("daemon stopped ({status})");
     Ok(())
 }
 

@@ -11,11 +11,13 @@ mod recover;
 mod replay;
 mod robust;
 mod run;
+mod signals;
 mod solve;
 mod solve3;
 mod status;
 mod synth;
 mod telemetry;
+mod view;
 
 use clap::Parser;
 use std::process::ExitCode;
@@ -35,6 +37,7 @@ fn main() -> ExitCode {
         cli::Command::Replay(opts) => replay::run(opts),
         cli::Command::Run(opts) => run::run(opts),
         cli::Command::Recover(opts) => recover::run(opts),
+        cli::Command::View(opts) => view::run(opts),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
