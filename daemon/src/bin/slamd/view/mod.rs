@@ -121,8 +121,7 @@ impl Channels {
             }
         }
         if self.map.has_sinks() {
-            self.map
-                .log_with_meta(frame.page_map().to_string().as_bytes(), at(t));
+            self.map.log_with_meta(&frame.page_map(), at(t));
         }
         self.publish_health(frame, status);
     }

@@ -252,19 +252,23 @@ impl Frame {
 
     /// The page's map: `{"version", "dimension", "poses": [[id, x, y], …],
     /// "loops": [[from id, to id, state], …]}` (the page draws from above).
-    pub fn page_map(&self) -> serde_json::Value {
-        let poses: Vec<_> = (self.poses.iter())
-            .map(|p| serde_json::json!([p.id, p.x, p.y]))
-            .collect();
-        let loops: Vec<_> = (self.loop_closures().into_iter())
-            .map(|(i, j, s)| serde_json::json!([self.poses[i].id, self.poses[j].id, s.name()]))
-            .collect();
-        serde_json::json!({
-            "version": self.header.version,
-            "dimension": self.header.dimension,
-            "poses": poses,
-            "loops": loops,
-        })
+    pub fn page_map(&self) -> Vec<u8> {
+        #[derive(serde::Serialize)]
+        struct PageMap {
+            version: u64,
+            dimension: u32,
+            poses: Vec<(u64, f64, f64)>,
+            loops: Vec<(u64, u64, &'static str)>,
+        }
+        let map = PageMap {
+            version: self.header.version,
+            dimension: self.header.dimension,
+            poses: self.poses.iter().map(|p| (p.id, p.x, p.y)).collect(),
+            loops: (self.loop_closures().into_iter())
+                .map(|(i, j, s)| (self.poses[i].id, self.poses[j].id, s.name()))
+                .collect(),
+        };
+        serde_json::to_vec(&map).unwrap_or_default()
     }
 }
 

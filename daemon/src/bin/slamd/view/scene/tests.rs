@@ -96,7 +96,7 @@ fn the_trajectory_carries_every_pose_as_the_snapshot_has_it() {
 
 #[test]
 fn the_page_map_lists_ids_positions_and_loop_states() {
-    let m = square().page_map();
+    let m: serde_json::Value = serde_json::from_slice(&square().page_map()).unwrap();
     assert_eq!(m["version"], 7);
     assert_eq!(m["poses"][3], serde_json::json!([13, 0.0, 1.0]));
     assert_eq!(
