@@ -10,6 +10,7 @@
 //! each file: one byte flipped, and separately 16 bytes zeroed.
 
 use slamd::geometry::Pose2;
+use slamd::graph::KeyframeInput;
 use slamd::store::recovery::{self, Lost};
 use slamd::store::{MapFile, Record, StateConfig, StateDir, StoreError};
 use slamd_protocol::codec::Origin;
@@ -41,7 +42,7 @@ fn manhattan(dir: &Path) -> Vec<Record> {
         let origin = next();
         let edges = group.iter().map(|&e| (next(), e)).collect::<Vec<_>>();
         if k >= half {
-            records.push(Record::Keyframe(origin, g.id_of(k), None, 0));
+            records.push(Record::Keyframe(origin, KeyframeInput::new(g.id_of(k), None, 0)));
             records.extend(edges.into_iter().map(|(o, e)| Record::Edge(o, g.edge_input(e))));
         }
     }
@@ -267,8 +268,8 @@ fn the_daemon_refuses_and_slamd_recover_reports() {
     let mut g = map.graph().expect("the checkpoint's graph");
     for r in by_number.values() {
         match *r {
-            Record::Keyframe(_, id, guess, _) => {
-                g.add_keyframe(id, guess).expect("a new keyframe");
+            Record::Keyframe(_, k) => {
+                g.add_keyframe(k.id, k.guess).expect("a new keyframe");
             }
             Record::Edge(_, e) => {
                 g.add_edge(e.from, e.to, e.measurement, e.information, e.kind)

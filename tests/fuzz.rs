@@ -300,14 +300,14 @@ proptest! {
 
     #[test]
     fn any_keyframe_message_decodes_or_is_rejected(m in keyframe()) {
-        if let Ok((_, _, guess)) = keyframe_in::<Pose3>(&m) {
+        if let Ok((_, k)) = keyframe_in::<Pose3>(&m) {
             prop_assert_eq!(m.dimension, 3);
-            prop_assert!(guess.is_none_or(|g| g.is_finite()));
+            prop_assert!(k.guess.is_none_or(|g| g.is_finite()));
         }
         match keyframe_in::<Pose2>(&m) {
-            Ok((o, id, guess)) => {
-                prop_assert_eq!((o.frontend, o.sequence, id), (m.frontend, m.sequence, m.id));
-                prop_assert!(guess.is_none_or(|g| g.is_finite()));
+            Ok((o, k)) => {
+                prop_assert_eq!((o.frontend, o.sequence, k.id, k.timestamp_ns), (m.frontend, m.sequence, m.id, m.timestamp_ns));
+                prop_assert!(k.guess.is_none_or(|g| g.is_finite()));
             }
             Err(r) => {
                 prop_assert_eq!((r.frontend, r.sequence), (m.frontend, m.sequence));

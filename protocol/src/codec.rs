@@ -16,7 +16,7 @@ use crate::message::{kind, INFORMATION_UPPER, POSE_PARAMS};
 use crate::{Edge, EdgeKindWire, GpsFix, Keyframe, Rejection, RejectionReason, PROTOCOL_VERSION};
 use slamd_types::{
     EdgeInput, EdgeKind, FixInput, Geodetic, GpsError, InformationError, InformationMatrix, KeyframeId,
-    RigidMotion,
+    KeyframeInput, RigidMotion,
 };
 
 /// Who sent a message and its number.
@@ -26,6 +26,15 @@ pub struct Origin {
     pub frontend: u32,
     /// Its message number.
     pub sequence: u64,
+}
+
+impl Origin {
+    /// No frontend: input given in the process (a file, the embedded
+    /// engine, a test).
+    pub const LOCAL: Origin = Origin {
+        frontend: 0,
+        sequence: 0,
+    };
 }
 
 /// A rejection of message `message` (a [`kind`] constant) from `o`.
@@ -77,8 +86,9 @@ fn pose_in<P: RigidMotion>(v: &[f64; POSE_PARAMS]) -> Result<P, (RejectionReason
     ))
 }
 
-/// A keyframe message as the engine takes it: id and optional guess.
-pub fn keyframe_in<P: RigidMotion>(m: &Keyframe) -> Result<(Origin, KeyframeId, Option<P>), Rejection> {
+/// A keyframe message as the engine takes it: id, optional guess and
+/// timestamp.
+pub fn keyframe_in<P: RigidMotion>(m: &Keyframe) -> Result<(Origin, KeyframeInput<P>), Rejection> {
     let o = Origin {
         frontend: m.frontend,
         sequence: m.sequence,
@@ -86,11 +96,12 @@ pub fn keyframe_in<P: RigidMotion>(m: &Keyframe) -> Result<(Origin, KeyframeId, 
     let ids = [m.id, 0];
     check_version(o, kind::KEYFRAME, m.protocol, ids)?;
     check_dimension::<P>(o, kind::KEYFRAME, m.dimension, ids, &format!("keyframe {}", m.id))?;
+    let input = |guess| KeyframeInput::new(m.id, guess, m.timestamp_ns);
     if m.has_guess == 0 {
-        return Ok((o, m.id, None));
+        return Ok((o, input(None)));
     }
     match pose_in(&m.guess) {
-        Ok(guess) => Ok((o, m.id, Some(guess))),
+        Ok(guess) => Ok((o, input(Some(guess)))),
         Err((reason, why)) => Err(reject(
             o,
             kind::KEYFRAME,
@@ -424,7 +435,7 @@ mod tests {
                 sequence: 1,
             },
         );
-        assert_eq!(keyframe_in(&k).unwrap().2, Some(Pose2::new(1.0, 2.0, 0.0)));
+        assert_eq!(keyframe_in(&k).unwrap().1.guess, Some(Pose2::new(1.0, 2.0, 0.0)));
         k.guess[2] = f64::NAN;
         assert_eq!(
             keyframe_in::<Pose2>(&k).unwrap_err().reason(),
@@ -469,7 +480,7 @@ mod tests {
         );
         let mut k = keyframe_out(6, 0, Some(z), o);
         assert_eq!(
-            keyframe_in::<Pose3>(&k).unwrap().2.map(|g| g.translation),
+            keyframe_in::<Pose3>(&k).unwrap().1.guess.map(|g| g.translation),
             Some(z.translation)
         );
         k.guess[4] = f64::NAN;

@@ -42,6 +42,30 @@ impl EdgeKind {
     }
 }
 
+/// A keyframe as a frontend gives it: its id, an optional guess of its
+/// pose and the time it was taken.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct KeyframeInput<P: RigidMotion = Pose2> {
+    /// Its id.
+    pub id: KeyframeId,
+    /// A guess of its pose in the map frame; `None` lets slamd place it by
+    /// its first edge.
+    pub guess: Option<P>,
+    /// When it was taken (ns; 0: not given).
+    pub timestamp_ns: u64,
+}
+
+impl<P: RigidMotion> KeyframeInput<P> {
+    /// Bundles the fields.
+    pub fn new(id: KeyframeId, guess: Option<P>, timestamp_ns: u64) -> Self {
+        Self {
+            id,
+            guess,
+            timestamp_ns,
+        }
+    }
+}
+
 /// An edge as a frontend gives it: keyframe ids, `T_ij`, Ω and its kind.
 /// `P` is the pose type: [`Pose2`] (the default) or
 /// [`Pose3`](crate::Pose3).

@@ -27,7 +27,7 @@ mod pose3;
 pub use gps::{check_covariance, Geodetic, GpsError};
 pub use information::{Information, InformationError};
 pub use information6::Information6;
-pub use input::{EdgeInput, EdgeKind, FixInput, KeyframeId};
+pub use input::{EdgeInput, EdgeKind, FixInput, KeyframeId, KeyframeInput};
 pub use motion::{InformationMatrix, RigidMotion};
 pub use pose::{wrap_angle, Pose2};
 pub use pose3::{Pose3, QUATERNION_NORM_TOLERANCE};

@@ -91,7 +91,7 @@ impl<P: EnginePose> Bench<P> {
     fn ask(&mut self, ask: Ask<P>) -> Option<Decisions> {
         match ask {
             Ask::Op(op) => {
-                let update = matches!(op, Op::Keyframe { .. }) && self.fresh;
+                let update = matches!(op, Op::Keyframe(_)) && self.fresh;
                 let decided = update.then(|| self.update());
                 if let Err(e) = self.engine.submit(op) {
                     // the publishing engine applied it: only numbers differ

@@ -79,11 +79,12 @@ pub use snapshot::Snapshot;
 
 use crate::geometry::Pose2;
 use crate::gps::{Geodetic, GpsFix, LocalFrame};
-use crate::graph::KeyframeId;
+use crate::graph::{KeyframeId, KeyframeInput};
 use background::Background;
 use judge::Judge;
 use op::Polish;
 use schedule::Schedule;
+use slamd_protocol::codec::Origin;
 use state::State;
 use std::collections::HashMap;
 
@@ -106,8 +107,6 @@ pub struct Engine<P: EnginePose = Pose2> {
     work_base: FactorWork,
     /// Every fix taken, as received (what a saved map keeps).
     fixes: Vec<FixInput>,
-    /// Each keyframe's timestamp (ns; 0: none), by arrival.
-    timestamps: Vec<u64>,
     /// With the filter on: the loop closures' judge ([`judge`]).
     judge: Option<Judge<P>>,
     /// Loop closures not yet in the estimate with the judge's switch, with
@@ -161,7 +160,6 @@ impl<P: EnginePose> Engine<P> {
             work_done: FactorWork::default(),
             work_base: FactorWork::default(),
             fixes: Vec::new(),
-            timestamps: Vec::new(),
             judge: None,
             undecided: HashMap::new(),
             decision_lags: Vec::new(),
@@ -192,8 +190,7 @@ impl<P: EnginePose> Engine<P> {
         guess: Option<P>,
         timestamp_ns: u64,
     ) -> Result<usize, EngineError> {
-        self.submit(Op::Keyframe { id, guess })?;
-        self.timestamps.push(timestamp_ns);
+        self.submit(Op::Keyframe(KeyframeInput::new(id, guess, timestamp_ns)))?;
         Ok(self.state.model.graph.len() - 1)
     }
 
@@ -205,8 +202,14 @@ impl<P: EnginePose> Engine<P> {
     /// Adds an edge between two known keyframes and returns its index. It
     /// joins the estimate when it links to the gauge's part of the graph.
     pub fn add_edge(&mut self, edge: EdgeInput<P>) -> Result<usize, EngineError> {
+        self.add_edge_from(edge, Origin::LOCAL)
+    }
+
+    /// [`Self::add_edge`] for a message `origin` sent, which the edge keeps
+    /// ([`Self::edge_origin`], saved maps).
+    pub fn add_edge_from(&mut self, edge: EdgeInput<P>, origin: Origin) -> Result<usize, EngineError> {
         let held = self.judge.is_some() && edge.kind.switchable();
-        self.submit(Op::Edge(edge))?;
+        self.submit(Op::Edge(edge, origin))?;
         self.schedule.edge_added();
         let e = self.state.model.graph.edges().len() - 1;
         if held {
@@ -368,7 +371,6 @@ impl<P: EnginePose> Engine<P> {
             chi2: self.state.chi2(),
             resolves: self.stats.resolves,
             keyframes: m.graph.keyframes(),
-            timestamps: &self.timestamps,
             states: &m.keyframes,
             poses: self.state.estimate(),
             georef: self.state.georef(),
@@ -393,6 +395,12 @@ impl<P: EnginePose> Engine<P> {
     /// counts `s²` times.
     pub fn switches(&self) -> Vec<f64> {
         self.state.model.edges.iter().map(|s| s.switch).collect()
+    }
+
+    /// Who sent edge `e` ([`Origin::LOCAL`] for one added without an
+    /// origin, or past the end).
+    pub fn edge_origin(&self, e: usize) -> Origin {
+        self.state.model.edges.get(e).map_or(Origin::LOCAL, |s| s.origin)
     }
 
     /// Work counters.

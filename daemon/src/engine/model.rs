@@ -13,6 +13,7 @@ use crate::nonlinear::{LevenbergMarquardtParams, PositionPrior};
 use crate::outliers::consistency::ConsistencyGraph;
 use crate::outliers::cycles;
 use crate::outliers::{robust_polish, OutlierConfig, RobustEdges, OFF_BELOW, REJECTED_BELOW};
+use slamd_protocol::codec::Origin;
 use std::collections::HashMap;
 use std::sync::atomic::AtomicBool;
 use std::sync::{Arc, Mutex};
@@ -37,6 +38,8 @@ pub struct EdgeState {
     pub admitted: bool,
     /// Its terms are in the factor.
     pub applied: bool,
+    /// Who sent it (what a saved map and the switch list report).
+    pub origin: Origin,
 }
 
 impl EdgeState {
@@ -46,6 +49,7 @@ impl EdgeState {
         switch: 1.0,
         admitted: false,
         applied: false,
+        origin: Origin::LOCAL,
     };
 
     /// A new loop closure held out (switch 0) until the judge decides it.
@@ -73,6 +77,8 @@ pub struct KeyframeState {
     pub joined: bool,
     /// The applied edges at it.
     pub incident: Vec<u32>,
+    /// When the frontend took it (ns on its clock; 0: not given).
+    pub timestamp_ns: u64,
 }
 
 /// What the engine holds of one GPS fix.

@@ -5,20 +5,17 @@ use super::pose::EnginePose;
 use super::EdgeInput;
 use crate::geometry::Pose2;
 use crate::gps::GpsFix;
-use crate::graph::KeyframeId;
+use crate::graph::KeyframeInput;
+use slamd_protocol::codec::Origin;
 
 /// One change to the graph, as the engine received it.
 #[derive(Clone, Debug)]
 pub enum Op<P: EnginePose = Pose2> {
-    /// A new keyframe.
-    Keyframe {
-        /// Its id.
-        id: KeyframeId,
-        /// An initial pose in the map frame, if known.
-        guess: Option<P>,
-    },
-    /// A new edge.
-    Edge(EdgeInput<P>),
+    /// A new keyframe: its id, a guess of its pose in the map frame if
+    /// known, its timestamp.
+    Keyframe(KeyframeInput<P>),
+    /// A new edge, and who sent it.
+    Edge(EdgeInput<P>, Origin),
     /// A GPS fix on a known keyframe, in the engine's ENU frame.
     Gps(GpsFix),
     /// A new weight `scale ∈ [0, ∞)` for an edge (0 removes it).

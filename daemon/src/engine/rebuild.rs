@@ -100,6 +100,7 @@ mod tests {
     use crate::geometry::Pose2;
     use crate::graph::{EdgeKind, Information, KeyframeId};
     use crate::outliers::{OutlierConfig, OFF_BELOW};
+    use slamd_protocol::codec::Origin;
 
     /// Six keyframes 1 m apart along x, then two loop closures from 0 to
     /// 5 (edges 5 and 6): one `x` metres long (let in on arrival when near
@@ -115,7 +116,7 @@ mod tests {
         }
         for z in [Pose2::new(x, 0.0, 0.0), Pose2::new(-40.0, 30.0, 2.0)] {
             let closure = EdgeInput::new(0, 5, z, Information::identity(), EdgeKind::LoopClosure);
-            state.replay(&Op::Edge(closure), 0.0).unwrap();
+            state.replay(&Op::Edge(closure, Origin::LOCAL), 0.0).unwrap();
         }
         state.solve(0.0).unwrap();
         state
@@ -241,7 +242,7 @@ mod tests {
                     Information::identity(),
                     EdgeKind::LoopClosure,
                 );
-                state.replay(&Op::Edge(closure), 0.0).unwrap();
+                state.replay(&Op::Edge(closure, Origin::LOCAL), 0.0).unwrap();
             }
         }
         state.solve(0.0).unwrap();

@@ -41,7 +41,10 @@ pub(super) fn state_of<P: EnginePose>(
     let mut lin = Vec::with_capacity(map.keyframes.len());
     for k in &map.keyframes {
         model.graph.add_keyframe(k.id, k.guess)?;
-        model.keyframes.push(KeyframeState::default());
+        model.keyframes.push(KeyframeState {
+            timestamp_ns: k.timestamp_ns,
+            ..KeyframeState::default()
+        });
         lin.push(k.lin);
     }
     for e in &map.edges {
@@ -57,6 +60,7 @@ pub(super) fn state_of<P: EnginePose>(
         model.edges.push(EdgeState {
             scale: e.scale,
             switch,
+            origin: e.origin,
             ..EdgeState::NEW
         });
     }
@@ -142,14 +146,13 @@ fn fix_of<P: EnginePose>(
     Ok(GpsFix::at(f, &position, k, &frame))
 }
 
-/// The map `state` holds, with each keyframe's timestamp and the loop
-/// closures still `pending` (its edges' origins, the acknowledgements and
+/// The map `state` holds, with each keyframe's timestamp, each edge's
+/// origin and the loop closures still `pending` (the acknowledgements and
 /// the held messages are the daemon's to fill in).
 pub(super) fn map_of<P: EnginePose>(
     state: &State<P>,
     origin: Option<Geodetic>,
     fixes: &[FixInput],
-    timestamps: &[u64],
     pending: impl Fn(usize) -> bool,
 ) -> MapFile<P> {
     let m = &state.model;
@@ -163,7 +166,7 @@ pub(super) fn map_of<P: EnginePose>(
             estimate: estimate[k],
             lin: lin.get(k).copied().unwrap_or(estimate[k]),
             joined: m.joined(k),
-            timestamp_ns: timestamps.get(k).copied().unwrap_or(0),
+            timestamp_ns: m.keyframes[k].timestamp_ns,
         })
         .collect();
     let edges = (0..m.graph.edges().len())
@@ -172,10 +175,7 @@ pub(super) fn map_of<P: EnginePose>(
             scale: m.edges[e].scale,
             switch: m.edges[e].switch,
             pending: pending(e),
-            origin: slamd_protocol::codec::Origin {
-                frontend: 0,
-                sequence: 0,
-            },
+            origin: m.edges[e].origin,
         })
         .collect();
     MapFile {
@@ -246,7 +246,6 @@ impl<P: EnginePose> Engine<P> {
         engine.schedule.polished(&state);
         engine.state = state;
         engine.fixes = map.fixes.clone();
-        engine.timestamps = map.keyframes.iter().map(|k| k.timestamp_ns).collect();
         engine.version = 1;
         if polish == Polish::Full {
             engine.stats.resolves += 1;
@@ -255,15 +254,11 @@ impl<P: EnginePose> Engine<P> {
     }
 
     /// The map as it stands: keyframes, edges with their weights and
-    /// switches, the estimate, the GPS origin, fixes and georeference.
-    /// Edge origins, acknowledgements and held messages are left empty.
+    /// switches and origins, the estimate, the GPS origin, fixes and
+    /// georeference. Acknowledgements and held messages are left empty.
     pub fn map(&self) -> crate::store::MapFile<P> {
-        map_of(
-            &self.state,
-            self.gps_origin(),
-            &self.fixes,
-            &self.timestamps,
-            |e| self.is_pending(e),
-        )
+        map_of(&self.state, self.gps_origin(), &self.fixes, |e| {
+            self.is_pending(e)
+        })
     }
 }

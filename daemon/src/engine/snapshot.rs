@@ -16,7 +16,6 @@ pub struct Snapshot<'a, P: RigidMotion = Pose2> {
     /// Number of completed re-solves so far.
     pub resolves: usize,
     pub(super) keyframes: &'a [Keyframe<P>],
-    pub(super) timestamps: &'a [u64],
     pub(super) states: &'a [KeyframeState],
     pub(super) poses: &'a [P],
     /// The map→ENU motion, once two GPS fixes have georeferenced the map.
@@ -40,10 +39,7 @@ impl<'a, P: RigidMotion> Snapshot<'a, P> {
     /// The timestamp (ns; 0: none) of each keyframe [`Self::poses`] yields,
     /// in the same order.
     pub fn timestamps(&self) -> impl Iterator<Item = u64> + 'a {
-        let (t, s) = (self.timestamps, self.states);
-        (0..s.len())
-            .filter(move |&i| s[i].joined)
-            .map(move |i| t.get(i).copied().unwrap_or(0))
+        (self.states.iter()).filter(|s| s.joined).map(|s| s.timestamp_ns)
     }
 
     /// The newest keyframe in the estimate.

@@ -86,7 +86,7 @@ impl<P: EnginePose> State<P> {
     /// first: otherwise its loop closures met hundreds of dead-reckoned
     /// keyframes and entered the factor with large errors.
     pub fn replay(&mut self, op: &Op<P>, threshold: f64) -> Result<(), EngineError> {
-        if matches!(op, Op::Keyframe { .. }) && !self.model.unconnected.is_empty() {
+        if matches!(op, Op::Keyframe(_)) && !self.model.unconnected.is_empty() {
             if self.hint.is_empty() {
                 self.solve(threshold)?;
             } else {
@@ -145,10 +145,13 @@ impl<P: EnginePose> State<P> {
     /// Applies one change. Nothing is stored when it is rejected.
     pub fn apply(&mut self, op: &Op<P>) -> Result<(), EngineError> {
         match op {
-            Op::Keyframe { id, guess } => {
-                let k = self.model.graph.add_keyframe(*id, *guess)?;
-                self.model.keyframes.push(KeyframeState::default());
-                let gauge = guess.unwrap_or(P::IDENTITY);
+            Op::Keyframe(input) => {
+                let k = self.model.graph.add_keyframe(input.id, input.guess)?;
+                self.model.keyframes.push(KeyframeState {
+                    timestamp_ns: input.timestamp_ns,
+                    ..KeyframeState::default()
+                });
+                let gauge = input.guess.unwrap_or(P::IDENTITY);
                 self.estimate.push(gauge);
                 if k == 0 {
                     // keyframe 0 fixes the gauge where it is
@@ -157,7 +160,7 @@ impl<P: EnginePose> State<P> {
                 }
                 Ok(())
             }
-            Op::Edge(input) => {
+            Op::Edge(input, origin) => {
                 let e = self.model.graph.add_edge(
                     input.from,
                     input.to,
@@ -167,7 +170,10 @@ impl<P: EnginePose> State<P> {
                 )?;
                 let held = self.model.judged && input.kind.switchable();
                 let state = if held { EdgeState::HELD } else { EdgeState::NEW };
-                self.model.edges.push(state);
+                self.model.edges.push(EdgeState {
+                    origin: *origin,
+                    ..state
+                });
                 self.chi2.push_edge();
                 self.model.unconnected.push(e);
                 Ok(())
@@ -478,22 +484,20 @@ impl<P: EnginePose> State<P> {
 pub(super) mod tests {
     use super::*;
     use crate::engine::EdgeInput;
-    use crate::graph::Information;
+    use crate::graph::{Information, KeyframeInput};
+    use slamd_protocol::codec::Origin;
 
     /// Keyframe `id`, no guess.
     pub fn keyframe(id: KeyframeId) -> Op {
-        Op::Keyframe { id, guess: None }
+        Op::Keyframe(KeyframeInput::new(id, None, 0))
     }
 
     /// Odometry `step` from `from` to `to`, unit information.
     pub fn odometry(from: KeyframeId, to: KeyframeId, step: Pose2) -> Op {
-        Op::Edge(EdgeInput::new(
-            from,
-            to,
-            step,
-            Information::identity(),
-            EdgeKind::Odometry,
-        ))
+        Op::Edge(
+            EdgeInput::new(from, to, step, Information::identity(), EdgeKind::Odometry),
+            Origin::LOCAL,
+        )
     }
 
     /// Two poses equal to 1e-12 in every component.

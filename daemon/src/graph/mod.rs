@@ -12,7 +12,9 @@ pub use cost::{chi2, chi2_of_edges, edge_chi2, edge_error, edge_error_turned, Ed
 pub use cost3::{edge_error3, Delta3};
 pub use edge::Edge;
 use slamd_types::EdgeInput;
-pub use slamd_types::{EdgeKind, Information, Information6, InformationError, KeyframeId, Pose3};
+pub use slamd_types::{
+    EdgeKind, Information, Information6, InformationError, KeyframeId, KeyframeInput, Pose3,
+};
 
 use crate::geometry::Pose2;
 pub use slamd_types::{InformationMatrix, RigidMotion};

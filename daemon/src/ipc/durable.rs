@@ -13,7 +13,8 @@ use super::acks::Acks;
 use super::engine_loop::EngineLoop;
 use crate::engine::{Engine, EngineError, EnginePose};
 use crate::store::{Cut, MapEdge, MapFile, MapKeyframe, Record, StateDir};
-use slamd_types::KeyframeId;
+use slamd_protocol::{FrontendAck, MAX_FRONTENDS};
+use slamd_types::{KeyframeId, KeyframeInput};
 use std::collections::{HashMap, HashSet};
 use std::time::{Duration, Instant};
 
@@ -29,6 +30,149 @@ pub struct Start<P: EnginePose> {
     pub cut: Option<Cut>,
 }
 
+/// What makes the daemon's input durable: which messages each frontend
+/// has had taken, the state directory's journal and checkpoints, and the
+/// acknowledgements snapshots carry, which never run ahead of the disk.
+pub(super) struct Durability {
+    /// What each frontend has had taken.
+    acks: Acks,
+    /// The acknowledgements snapshots carry: of what the journal holds
+    /// (without a state directory, of what was taken).
+    acknowledged: [FrontendAck; MAX_FRONTENDS],
+    /// The state directory, if any.
+    store: Option<StateDir>,
+    /// The last journal commit failed; acknowledgements wait for one that
+    /// does not.
+    failing: bool,
+    last_checkpoint: Instant,
+    /// When it last wrote a checkpoint (ns since the UNIX epoch; 0: not
+    /// yet).
+    checkpoint_at_ns: u64,
+    /// `state.checkpoint_interval_s`.
+    interval: Duration,
+}
+
+impl Durability {
+    pub(super) fn new(checkpoint_interval_s: f64) -> Self {
+        Self {
+            acks: Acks::default(),
+            acknowledged: [FrontendAck::default(); MAX_FRONTENDS],
+            store: None,
+            failing: false,
+            last_checkpoint: Instant::now(),
+            checkpoint_at_ns: 0,
+            interval: Duration::from_secs_f64(checkpoint_interval_s.max(0.0)),
+        }
+    }
+
+    /// Takes `r`'s number and journals it (written at the next
+    /// [`Self::commit`]); false for a message taken before.
+    pub(super) fn admit<P: EnginePose>(&mut self, r: &Record<P>) -> bool {
+        if !self.acks.take(r.origin()) {
+            return false;
+        }
+        if let Some(store) = &mut self.store {
+            store.journal().append(r);
+        }
+        true
+    }
+
+    /// The IPC thread has handed over everything it had.
+    pub(super) fn seal(&mut self) {
+        self.acks.seal();
+    }
+
+    /// Writes the buffered records; on success the acknowledgements
+    /// advance to what was taken.
+    pub(super) fn commit(&mut self) {
+        let Some(store) = &mut self.store else {
+            self.acknowledged = self.acks.header();
+            return;
+        };
+        match store.journal().commit() {
+            Ok(()) => {
+                if self.failing {
+                    tracing::info!("The journal is written again; acknowledgements resume.");
+                }
+                self.failing = false;
+                self.acknowledged = self.acks.header();
+            }
+            Err(e) => {
+                if !self.failing {
+                    tracing::error!(error = %e, "Cannot write the journal; acknowledgements wait.");
+                }
+                self.failing = true;
+            }
+        }
+    }
+
+    /// fsyncs the journal when `state.sync` says it is due.
+    pub(super) fn sync_if_due(&mut self) {
+        if let Some(store) = &mut self.store {
+            if let Err(e) = store.journal().sync_if_due() {
+                tracing::error!(error = %e, "Cannot fsync the journal.");
+            }
+        }
+    }
+
+    /// A checkpoint is due: the journal is large, or the interval has
+    /// passed since the last one with records in between.
+    pub(super) fn checkpoint_due(&mut self) -> bool {
+        let waited = self.last_checkpoint.elapsed() >= self.interval;
+        (self.store.as_mut())
+            .is_some_and(|store| store.journal_full() || (waited && !store.journal().is_empty()))
+    }
+
+    /// Writes `map` with the acknowledgements and starts a new journal.
+    pub(super) fn checkpoint<P: EnginePose>(&mut self, mut map: MapFile<P>) {
+        let t0 = Instant::now();
+        map.acks = self.acks.saved();
+        let Some(store) = &mut self.store else {
+            return;
+        };
+        self.last_checkpoint = Instant::now();
+        match store.checkpoint(map) {
+            Ok(()) => {
+                self.failing = false;
+                self.acknowledged = self.acks.header();
+                self.checkpoint_at_ns = super::engine_loop::now_ns();
+                tracing::debug!(seconds = t0.elapsed().as_secs_f64(), "Checkpoint written.");
+            }
+            Err(e) => tracing::error!(error = %e, "Cannot write a checkpoint; the journal goes on."),
+        }
+    }
+
+    /// Whether there is a state directory.
+    pub(super) fn stored(&self) -> bool {
+        self.store.is_some()
+    }
+
+    /// The journal cannot be written (a full disk).
+    pub(super) fn failing(&self) -> bool {
+        self.failing
+    }
+
+    /// The acknowledgements snapshots carry.
+    pub(super) fn acknowledged(&self) -> [FrontendAck; MAX_FRONTENDS] {
+        self.acknowledged
+    }
+
+    /// When the last checkpoint was written (ns since the UNIX epoch).
+    pub(super) fn checkpoint_at_ns(&self) -> u64 {
+        self.checkpoint_at_ns
+    }
+
+    /// Bytes in the journal (0 without a state directory).
+    pub(super) fn journal_bytes(&self) -> u64 {
+        self.store.as_ref().map_or(0, |s| s.journal_len())
+    }
+
+    /// Frontends heard from within `window`.
+    pub(super) fn active(&self, window: Duration) -> usize {
+        self.acks.active(window)
+    }
+}
+
 impl<P: EnginePose> EngineLoop<P> {
     /// Takes up `start`: the journal's tail is folded into the map as the
     /// daemon would have applied it (a repeated keyframe refused, an edge
@@ -37,7 +181,8 @@ impl<P: EnginePose> EngineLoop<P> {
     /// anything. Nothing is journaled again.
     pub fn take_up(&mut self, start: Start<P>) -> Result<(), EngineError> {
         let t0 = Instant::now();
-        self.store = start.store;
+        let d = &mut self.durability;
+        d.store = start.store;
         if let Some(cut) = &start.cut {
             tracing::warn!(
                 offset = cut.offset,
@@ -47,25 +192,24 @@ impl<P: EnginePose> EngineLoop<P> {
         }
         let saved = start.map.is_some();
         let mut map = start.map.unwrap_or_default();
-        self.acks = Acks::from_saved(&map.acks);
+        d.acks = Acks::from_saved(&map.acks);
         let mut fold = Fold::new(&map);
         for r in std::mem::take(&mut map.held) {
             fold.record(&mut map, r);
         }
         let tail = start.tail.len();
         for r in start.tail {
-            if self.acks.take(r.origin()) {
+            if d.acks.take(r.origin()) {
                 fold.record(&mut map, r);
             }
         }
-        self.acks.seal();
+        d.acks.seal();
         fold.held = fold.waiting.drain().flat_map(|(_, v)| v).collect();
         if !saved && map.keyframes.is_empty() && fold.held.is_empty() {
-            self.durable = self.acks.header();
+            d.acknowledged = d.acks.header();
             return Ok(());
         }
         self.engine = Engine::restore(self.config.engine(), &map, tail > 0)?;
-        self.edge_origin = map.edges.iter().map(|e| e.origin).collect();
         self.counters.keyframes = map.keyframes.len() as u64;
         self.counters.edges = map.edges.len() as u64;
         self.counters.fixes = map.fixes.len() as u64;
@@ -88,74 +232,23 @@ impl<P: EnginePose> EngineLoop<P> {
         );
         // what was acknowledged before is acknowledged again at once, and
         // the restored map goes out
-        self.durable = self.acks.header();
+        self.durability.acknowledged = self.durability.acks.header();
         self.dirty = true;
         Ok(())
     }
 
-    /// Writes the buffered records; on success the acknowledgements
-    /// advance to what was taken.
-    pub(super) fn commit(&mut self) {
-        let Some(store) = &mut self.store else {
-            self.durable = self.acks.header();
-            return;
-        };
-        match store.journal().commit() {
-            Ok(()) => {
-                if self.store_failed {
-                    tracing::info!("The journal is written again; acknowledgements resume.");
-                }
-                self.store_failed = false;
-                self.durable = self.acks.header();
-            }
-            Err(e) => {
-                if !self.store_failed {
-                    tracing::error!(error = %e, "Cannot write the journal; acknowledgements wait.");
-                }
-                self.store_failed = true;
-            }
-        }
-    }
-
-    /// A checkpoint when the journal is large or the interval has passed
-    /// since the last one with records in between.
-    pub(super) fn checkpoint_if_due(&mut self) {
-        let Some(store) = &mut self.store else {
-            return;
-        };
-        let interval = Duration::from_secs_f64(self.config.state.checkpoint_interval_s.max(0.0));
-        let due = store.journal_full()
-            || (self.last_checkpoint.elapsed() >= interval && !store.journal().is_empty());
-        if due {
-            self.checkpoint();
-        }
-    }
-
-    /// Writes the whole map and starts a new journal.
+    /// Writes the whole map, with the messages still held, and starts a
+    /// new journal.
     pub(super) fn checkpoint(&mut self) {
-        let t0 = Instant::now();
-        let mut map = self.engine.map();
-        for (e, o) in map.edges.iter_mut().zip(&self.edge_origin) {
-            e.origin = *o;
+        if !self.durability.stored() {
+            return;
         }
-        map.acks = self.acks.saved();
+        let mut map = self.engine.map();
         map.held = (self.held.waiting())
             .map(|h| Record::Edge(h.origin, h.item))
             .chain(self.held_fixes.waiting().map(|h| Record::Fix(h.origin, h.item)))
             .collect();
-        let Some(store) = &mut self.store else {
-            return;
-        };
-        self.last_checkpoint = Instant::now();
-        match store.checkpoint(map) {
-            Ok(()) => {
-                self.store_failed = false;
-                self.durable = self.acks.header();
-                self.checkpoint_at_ns = super::engine_loop::now_ns();
-                tracing::debug!(seconds = t0.elapsed().as_secs_f64(), "Checkpoint written.");
-            }
-            Err(e) => tracing::error!(error = %e, "Cannot write a checkpoint; the journal goes on."),
-        }
+        self.durability.checkpoint(map);
     }
 }
 
@@ -183,7 +276,14 @@ impl<P: EnginePose> Fold<P> {
 
     fn record(&mut self, map: &mut MapFile<P>, r: Record<P>) {
         match r {
-            Record::Keyframe(_, id, guess, timestamp_ns) => {
+            Record::Keyframe(
+                _,
+                KeyframeInput {
+                    id,
+                    guess,
+                    timestamp_ns,
+                },
+            ) => {
                 if !self.ids.insert(id) {
                     self.refused += 1;
                     return;

@@ -2,30 +2,30 @@
 //! for missing keyframes, journals what it took and publishes one snapshot
 //! per batch (its state directory is in [`super::durable`]).
 
-use super::acks::Acks;
+use super::durable::Durability;
 use super::health::Latency;
 use super::held::{Held, Waiting};
 use crate::config::Config;
 use crate::engine::{upper_triangle, EdgeInput, Engine, EngineError, EnginePose, FixInput};
-use crate::graph::{EdgeKind, GraphError, KeyframeId};
+use crate::graph::{EdgeKind, GraphError, KeyframeId, KeyframeInput};
 use crate::outliers::REJECTED_BELOW;
-use crate::store::{Record, StateDir};
+use crate::store::Record;
 use crate::wire::{self, engine_rejection};
 use crossbeam::channel::{Receiver, RecvTimeoutError};
 use slamd_protocol::codec::Origin;
 use slamd_protocol::message::kind;
 use slamd_protocol::transport::{Outlet, TransportError};
 use slamd_protocol::{
-    DaemonStatus, FrontendAck, Rejection, RejectionReason, SnapshotHeader, SwitchesHeader, INFORMATION_UPPER,
-    MAX_FRONTENDS, PROTOCOL_VERSION,
+    DaemonStatus, Rejection, RejectionReason, SnapshotHeader, SwitchesHeader, INFORMATION_UPPER,
+    PROTOCOL_VERSION,
 };
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 /// What the IPC thread hands over; `P` is the pose type the daemon serves.
 #[derive(Clone, Debug)]
 pub enum Msg<P: EnginePose> {
-    /// A checked keyframe with its timestamp (ns; 0: none).
-    Keyframe(Origin, KeyframeId, Option<P>, u64),
+    /// A checked keyframe.
+    Keyframe(Origin, KeyframeInput<P>),
     /// A checked edge.
     Edge(Origin, EdgeInput<P>),
     /// A checked GPS fix.
@@ -69,26 +69,15 @@ pub struct EngineLoop<P: EnginePose> {
     pub(super) held_fixes: Held<FixInput>,
     pub(super) config: Config,
     pub(super) counters: Counters,
-    /// What each frontend has had taken.
-    pub(super) acks: Acks,
-    /// The acknowledgements snapshots carry: of what the journal holds
-    /// (without a state directory, of what was taken).
-    pub(super) durable: [FrontendAck; MAX_FRONTENDS],
-    /// The state directory, if any.
-    pub(super) store: Option<StateDir>,
-    /// The last journal commit failed; acknowledgements wait for one that
-    /// does not.
-    pub(super) store_failed: bool,
+    /// Acknowledgements, the journal and checkpoints.
+    pub(super) durability: Durability,
     /// Taking up a saved map: refusals were published before the restart
     /// and are not published again.
     pub(super) recovering: bool,
-    pub(super) last_checkpoint: Instant,
     /// This daemon start's number in the acknowledgements.
     instance: u64,
     /// When it started (ns since the UNIX epoch).
     started_at_ns: u64,
-    /// When it last wrote a checkpoint (ns since the UNIX epoch).
-    pub(super) checkpoint_at_ns: u64,
     /// When the engine thread took the first message of the batch being
     /// gathered.
     batch_start: Option<Instant>,
@@ -100,14 +89,13 @@ pub struct EngineLoop<P: EnginePose> {
     last_input: Instant,
     /// Input came since the engine was last told it is idle.
     idle_due: bool,
-    /// Who sent each engine edge, by index.
-    pub(super) edge_origin: Vec<Origin>,
     /// A loop closure arrived since the switches were last published.
     new_loop_closure: bool,
 }
 
 impl<P: EnginePose> EngineLoop<P> {
     pub fn new(config: Config, outlet: Outlet) -> Self {
+        let durability = Durability::new(config.state.checkpoint_interval_s);
         Self {
             engine: Engine::create(config.engine()),
             outlet,
@@ -115,15 +103,10 @@ impl<P: EnginePose> EngineLoop<P> {
             held_fixes: Held::default(),
             config,
             counters: Counters::default(),
-            acks: Acks::default(),
-            durable: [FrontendAck::default(); MAX_FRONTENDS],
-            store: None,
-            store_failed: false,
+            durability,
             recovering: false,
-            last_checkpoint: Instant::now(),
             instance: new_instance(),
             started_at_ns: now_ns(),
-            checkpoint_at_ns: 0,
             batch_start: None,
             latency: Latency::default(),
             // the status says which dimension is served before any snapshot
@@ -136,7 +119,6 @@ impl<P: EnginePose> EngineLoop<P> {
             last_publish: None,
             last_input: Instant::now(),
             idle_due: false,
-            edge_origin: Vec::new(),
             new_loop_closure: false,
         }
     }
@@ -167,7 +149,9 @@ impl<P: EnginePose> EngineLoop<P> {
                 }
             }
             self.publish_if_due();
-            self.checkpoint_if_due();
+            if self.durability.checkpoint_due() {
+                self.checkpoint();
+            }
             if !open {
                 break;
             }
@@ -175,9 +159,7 @@ impl<P: EnginePose> EngineLoop<P> {
         // whatever arrived last goes out, and into a checkpoint
         self.last_publish = None;
         self.publish_if_due();
-        if self.store.is_some() {
-            self.checkpoint();
-        }
+        self.checkpoint();
         self.counters
     }
 
@@ -206,7 +188,7 @@ impl<P: EnginePose> EngineLoop<P> {
     /// Applies one message; `false` means stop.
     fn handle(&mut self, msg: Msg<P>) -> bool {
         match msg {
-            Msg::Keyframe(o, id, guess, t) => self.take(Record::Keyframe(o, id, guess, t)),
+            Msg::Keyframe(o, k) => self.take(Record::Keyframe(o, k)),
             Msg::Edge(o, edge) => self.take(Record::Edge(o, edge)),
             Msg::Gps(o, fix) => self.take(Record::Fix(o, fix)),
             Msg::Rejected(r) => {
@@ -218,7 +200,7 @@ impl<P: EnginePose> EngineLoop<P> {
                     self.reject(r);
                 }
             }
-            Msg::Drained => self.acks.seal(),
+            Msg::Drained => self.durability.seal(),
             Msg::Tick => self.tick(),
             // while input flows the next batch swaps it in; an update for
             // it alone would hold up the keyframe behind it
@@ -240,12 +222,9 @@ impl<P: EnginePose> EngineLoop<P> {
 
     /// Records `r` as taken and journals it; false for a duplicate.
     pub(super) fn admit(&mut self, r: Record<P>) -> bool {
-        if !self.acks.take(r.origin()) {
+        if !self.durability.admit(&r) {
             self.counters.duplicates += 1;
             return false;
-        }
-        if let Some(store) = &mut self.store {
-            store.journal().append(&r);
         }
         self.dirty = true;
         true
@@ -254,17 +233,17 @@ impl<P: EnginePose> EngineLoop<P> {
     /// Applies a message taken in.
     fn apply(&mut self, r: Record<P>) {
         match r {
-            Record::Keyframe(o, id, guess, t) => match self.engine.add_keyframe_at(id, guess, t) {
+            Record::Keyframe(o, k) => match self.engine.add_keyframe_at(k.id, k.guess, k.timestamp_ns) {
                 Ok(_) => {
                     self.counters.keyframes += 1;
-                    for h in self.held.release(id) {
+                    for h in self.held.release(k.id) {
                         self.add_edge(h.origin, h.item, h.since);
                     }
-                    for h in self.held_fixes.release(id) {
+                    for h in self.held_fixes.release(k.id) {
                         self.add_gps(h.origin, h.item, h.since);
                     }
                 }
-                Err(e) => self.reject(engine_rejection(o, kind::KEYFRAME, [id, 0], &e)),
+                Err(e) => self.reject(engine_rejection(o, kind::KEYFRAME, [k.id, 0], &e)),
             },
             Record::Edge(o, edge) => self.add_edge(o, edge, Instant::now()),
             Record::Fix(o, fix) => self.add_gps(o, fix, Instant::now()),
@@ -274,11 +253,10 @@ impl<P: EnginePose> EngineLoop<P> {
 
     /// Adds an edge, or holds it while one of its keyframes is missing.
     pub(super) fn add_edge(&mut self, o: Origin, edge: EdgeInput<P>, since: Instant) {
-        match self.engine.add_edge(edge) {
+        match self.engine.add_edge_from(edge, o) {
             Ok(_) => {
                 self.counters.edges += 1;
                 self.dirty = true;
-                self.edge_origin.push(o);
                 self.new_loop_closure |= edge.kind != EdgeKind::Odometry;
             }
             Err(EngineError::Graph(GraphError::UnknownKeyframe(missing))) => {
@@ -386,12 +364,8 @@ impl<P: EnginePose> EngineLoop<P> {
         }
         // operators (`slamd status`) read the daemon while it idles
         self.publish_status();
-        if let Some(store) = &mut self.store {
-            if let Err(e) = store.journal().sync_if_due() {
-                tracing::error!(error = %e, "Cannot fsync the journal.");
-            }
-        }
-        if self.engine.resolving() || self.store_failed {
+        self.durability.sync_if_due();
+        if self.engine.resolving() || self.durability.failing() {
             // a finished re-solve is swapped in at the next update; a
             // failed journal commit is tried again
             self.dirty = true;
@@ -408,7 +382,7 @@ impl<P: EnginePose> EngineLoop<P> {
             }
         }
         // what the snapshot acknowledges is on disk first
-        self.commit();
+        self.durability.commit();
         self.publish_status();
         let t0 = Instant::now();
         let report = self.engine.update();
@@ -433,7 +407,7 @@ impl<P: EnginePose> EngineLoop<P> {
             georeferenced: u32::from(snap.georef.is_some()),
             has_origin: u32::from(snap.origin.is_some()),
             origin: snap.origin.map_or([0.0; 3], |o| [o.lat, o.lon, o.height]),
-            acks: self.durable,
+            acks: self.durability.acknowledged(),
             has_covariance: u32::from(covariance.is_some()),
             pending: snap.pending as u32,
             covariance_keyframe: covariance.map_or(0, |c| c.0),
@@ -495,16 +469,16 @@ impl<P: EnginePose> EngineLoop<P> {
         let (latency_p50_us, latency_p99_us) = self.latency.percentiles();
         let m = DaemonStatus {
             protocol: PROTOCOL_VERSION,
-            journal_failing: u32::from(self.store_failed),
+            journal_failing: u32::from(self.durability.failing()),
             instance: self.instance,
             started_at_ns: self.started_at_ns,
-            checkpoint_at_ns: self.checkpoint_at_ns,
-            journal_bytes: self.store.as_ref().map_or(0, |s| s.journal_len()),
-            frontends: self.acks.active(Duration::from_secs(60)) as u64,
+            checkpoint_at_ns: self.durability.checkpoint_at_ns(),
+            journal_bytes: self.durability.journal_bytes(),
+            frontends: self.durability.active(Duration::from_secs(60)) as u64,
             latency_p50_us,
             latency_p99_us,
             snapshot: self.last_header,
-            acks: self.durable,
+            acks: self.durability.acknowledged(),
         };
         if let Err(e) = self.outlet.publish_status(m) {
             tracing::error!(error = %e, "Cannot publish the acknowledgements.");
@@ -533,10 +507,7 @@ impl<P: EnginePose> EngineLoop<P> {
         let graph = self.engine.graph();
         let items = loops.iter().map(|&e| {
             let edge = &edges[e];
-            let o = self.edge_origin.get(e).copied().unwrap_or(Origin {
-                frontend: 0,
-                sequence: 0,
-            });
+            let o = self.engine.edge_origin(e);
             let pending = self.engine.is_pending(e);
             wire::switch_out(
                 graph.id_of(edge.from),

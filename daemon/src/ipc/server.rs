@@ -160,7 +160,7 @@ pub fn serve_map<P: EnginePose>(
     let exit = ingress.run(tick, |wake| {
         let msg = match wake {
             Wake::Input(Input::Keyframe(m)) => match wire::keyframe_in::<P>(&m) {
-                Ok((o, id, guess)) => Msg::Keyframe(o, id, guess, m.timestamp_ns),
+                Ok((o, k)) => Msg::Keyframe(o, k),
                 Err(r) => Msg::Rejected(r),
             },
             Wake::Input(Input::Edge(m)) => match wire::edge_in::<P>(&m) {

@@ -20,14 +20,14 @@ use super::bytes::{Get, Put};
 use super::StoreError;
 use slamd_protocol::codec::Origin;
 use slamd_types::{
-    EdgeInput, EdgeKind, FixInput, Geodetic, InformationMatrix, KeyframeId, Pose2, RigidMotion,
+    EdgeInput, EdgeKind, FixInput, Geodetic, InformationMatrix, KeyframeInput, Pose2, RigidMotion,
 };
 
 /// One message the daemon took in; `P` is the pose type of the map.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Record<P: RigidMotion = Pose2> {
-    /// A keyframe, its guess and its timestamp (ns; 0: none).
-    Keyframe(Origin, KeyframeId, Option<P>, u64),
+    /// A keyframe.
+    Keyframe(Origin, KeyframeInput<P>),
     /// An edge.
     Edge(Origin, EdgeInput<P>),
     /// A GPS fix.
@@ -69,7 +69,7 @@ impl<P: RigidMotion> Record<P> {
     /// Who sent it.
     pub fn origin(&self) -> Origin {
         match *self {
-            Record::Keyframe(o, ..) | Record::Edge(o, _) | Record::Fix(o, _) | Record::Refused(o) => o,
+            Record::Keyframe(o, _) | Record::Edge(o, _) | Record::Fix(o, _) | Record::Refused(o) => o,
         }
     }
 
@@ -77,8 +77,8 @@ impl<P: RigidMotion> Record<P> {
     pub fn encode(&self, p: &mut Put) {
         let (keyframe, edge) = tags(P::DIMENSION);
         let (tag, o) = match self {
-            Record::Keyframe(o, .., 0) => (keyframe, o),
-            Record::Keyframe(o, ..) => (stamped_tag(P::DIMENSION), o),
+            Record::Keyframe(o, k) if k.timestamp_ns == 0 => (keyframe, o),
+            Record::Keyframe(o, _) => (stamped_tag(P::DIMENSION), o),
             Record::Edge(o, _) => (edge, o),
             Record::Fix(o, f) if f.height_variance.is_some() => (FIX_HEIGHT, o),
             Record::Fix(o, _) => (FIX, o),
@@ -88,12 +88,12 @@ impl<P: RigidMotion> Record<P> {
         p.u32(o.frontend);
         p.u64(o.sequence);
         match self {
-            Record::Keyframe(_, id, guess, timestamp) => {
-                p.u64(*id);
-                p.u8(u8::from(guess.is_some()));
-                put_pose(p, &guess.unwrap_or(P::IDENTITY));
-                if *timestamp != 0 {
-                    p.u64(*timestamp);
+            Record::Keyframe(_, k) => {
+                p.u64(k.id);
+                p.u8(u8::from(k.guess.is_some()));
+                put_pose(p, &k.guess.unwrap_or(P::IDENTITY));
+                if k.timestamp_ns != 0 {
+                    p.u64(k.timestamp_ns);
                 }
             }
             Record::Edge(_, e) => put_edge(p, e),
@@ -130,8 +130,16 @@ impl<P: RigidMotion> Record<P> {
                 let id = g.u64()?;
                 let has = g.u8()?;
                 let pose = get_pose(&mut g)?;
-                let timestamp = if t == stamped { g.u64()? } else { 0 };
-                Record::Keyframe(o, id, (has != 0).then_some(pose), timestamp)
+                let timestamp_ns = if t == stamped { g.u64()? } else { 0 };
+                let guess = (has != 0).then_some(pose);
+                Record::Keyframe(
+                    o,
+                    KeyframeInput {
+                        id,
+                        guess,
+                        timestamp_ns,
+                    },
+                )
             }
             t if t == edge => Record::Edge(o, get_edge(&mut g)?),
             FIX => Record::Fix(o, get_fix(&mut g, false)?),
@@ -273,12 +281,10 @@ mod tests {
         };
         let info = Information::from_upper([10.0, 1.0, 0.0, 20.0, 0.5, 30.0]).unwrap();
         vec![
-            Record::Keyframe(o(1), 0, None, 0),
+            Record::Keyframe(o(1), KeyframeInput::new(0, None, 0)),
             Record::Keyframe(
                 o(2),
-                1,
-                Some(Pose2::new(1.0, -2.0, 0.5)),
-                1_700_000_000_123_456_789,
+                KeyframeInput::new(1, Some(Pose2::new(1.0, -2.0, 0.5)), 1_700_000_000_123_456_789),
             ),
             Record::Edge(
                 o(3),
@@ -352,8 +358,8 @@ mod tests {
         let z = Pose3::from_xyz_rpy([1.0, 2.0, -0.5, 0.1, 0.2, -0.3]);
         let info = Information6::identity().scaled(2.0);
         for r in [
-            Record::Keyframe(o, 4, Some(z), 0),
-            Record::Keyframe(o, 5, None, 42),
+            Record::Keyframe(o, KeyframeInput::new(4, Some(z), 0)),
+            Record::Keyframe(o, KeyframeInput::new(5, None, 42)),
             Record::Edge(o, EdgeInput::new(4, 5, z, info, EdgeKind::LoopClosure)),
         ] {
             let mut p = Put::default();
@@ -368,10 +374,10 @@ mod tests {
                     assert!((a.measurement.translation - b.measurement.translation).norm() < 1e-15);
                     assert!(a.measurement.rotation.angle_to(&b.measurement.rotation) < 1e-12);
                 }
-                (Record::Keyframe(_, a, ga, ta), Record::Keyframe(_, b, gb, tb)) => {
+                (Record::Keyframe(_, a), Record::Keyframe(_, b)) => {
                     assert_eq!(
-                        (a, ga.map(|g| g.translation), ta),
-                        (b, gb.map(|g| g.translation), tb)
+                        (a.id, a.guess.map(|g| g.translation), a.timestamp_ns),
+                        (b.id, b.guess.map(|g| g.translation), b.timestamp_ns)
                     );
                 }
                 _ => panic!("{back:?} is not {r:?}"),

@@ -2,7 +2,9 @@ use super::*;
 use crate::gps::Georef;
 use faer::c64;
 use slamd_protocol::codec::Origin;
-use slamd_types::{EdgeInput, EdgeKind, FixInput, Geodetic, Information, Information6, Pose2, Pose3};
+use slamd_types::{
+    EdgeInput, EdgeKind, FixInput, Geodetic, Information, Information6, KeyframeInput, Pose2, Pose3,
+};
 
 fn origin(s: u64) -> Origin {
     Origin {
@@ -17,7 +19,7 @@ fn stream(n: u64) -> Vec<Record> {
     let mut s = 0;
     for k in 0..n {
         s += 1;
-        out.push(Record::Keyframe(origin(s), k, None, 0));
+        out.push(Record::Keyframe(origin(s), KeyframeInput::new(k, None, 0)));
         if k > 0 {
             s += 1;
             let step = Pose2::new(1.0, 0.0, 0.1);
@@ -67,7 +69,7 @@ fn an_older_journal_is_rewritten_in_this_format_before_appending() {
     std::fs::write(&path, &bytes).unwrap();
     let (mut state, rec) = StateDir::open::<Pose2>(&dir, &StateConfig::default()).unwrap();
     assert_eq!(rec.tail, records);
-    let stamped = Record::Keyframe(origin(99), 99, None, 123);
+    let stamped = Record::Keyframe(origin(99), KeyframeInput::new(99, None, 123));
     state.journal().append(&stamped);
     state.journal().commit().unwrap();
     let after = std::fs::read(&path).unwrap();
@@ -478,7 +480,7 @@ fn a_3d_map_reads_back_and_a_2d_reader_refuses_it() {
             pending: false,
             origin: origin(2),
         }],
-        held: vec![Record::Keyframe(origin(3), 7, Some(z), 5)],
+        held: vec![Record::Keyframe(origin(3), KeyframeInput::new(7, Some(z), 5))],
         ..MapFile::default()
     };
     let bytes = map.encode();
