@@ -17,7 +17,7 @@ use proptest::prelude::*;
 use slamd::engine::EngineConfig;
 use slamd::geometry::{wrap_angle, Pose2};
 use slamd::graph::{EdgeKind, Information, Information6, Pose3, PoseGraph};
-use slamd::solver::{solve_batch, solve_batch3, BatchOptions};
+use slamd::solver::{solve_batch, BatchOptions};
 use slamd_tests::{max_pose_error, replay, walk};
 use std::f64::consts::{FRAC_PI_2, PI};
 
@@ -262,7 +262,7 @@ proptest! {
             written.push((i, j, z, omega));
         }
         let options = BatchOptions { polish: true, ..Default::default() };
-        let s = solve_batch3(&g, &options).expect("connected");
+        let s = solve_batch(&g, &options).expect("connected");
         let chi2 = cost(&written, &s.poses, error3);
         prop_assert!((s.chi2 - chi2).abs() <= 1e-9 * (1.0 + chi2), "slamd χ² {} vs as written {chi2}", s.chi2);
         let bump = |p: &Pose3, c: usize, h: f64| {

@@ -4,7 +4,7 @@
 
 use proptest::prelude::*;
 use slamd::graph::{EdgeKind, Information6, Pose3, PoseGraph};
-use slamd::solver::{solve_batch3, BatchOptions, Formulation};
+use slamd::solver::{solve_batch, BatchOptions, Formulation};
 use std::f64::consts::PI;
 
 const TOL: f64 = 1e-9;
@@ -50,7 +50,7 @@ fn check(truth: &[Pose3], pairs: &[(usize, usize)]) -> Result<(), TestCaseError>
                 polish,
                 ..Default::default()
             };
-            let s = solve_batch3(&g, &options).map_err(|e| TestCaseError::fail(e.to_string()))?;
+            let s = solve_batch(&g, &options).map_err(|e| TestCaseError::fail(e.to_string()))?;
             let err = max_error(&s.poses, truth);
             prop_assert!(err < TOL, "{formulation} polish={polish}: error {err:e}");
             prop_assert!(s.chi2 < 1e-12, "{formulation} polish={polish}: chi2 {}", s.chi2);
@@ -136,7 +136,7 @@ fn sphere2500_reaches_the_published_optimum() {
         polish: true,
         ..Default::default()
     };
-    let s = solve_batch3(&g, &options).expect("solvable");
+    let s = solve_batch(&g, &options).expect("solvable");
     assert!((s.chi2 - 727.15).abs() < 0.01, "chi2 {}", s.chi2);
     assert!(s.linear_chi2 < 2.0 * s.chi2, "linear chi2 {}", s.linear_chi2);
 }
@@ -192,7 +192,7 @@ fn the_robust_polish_switches_off_wrong_loop_closures_in_3d() {
         robust: Some(slamd::outliers::OutlierConfig::default()),
         ..Default::default()
     };
-    let s = solve_batch3(&g, &options).expect("solvable");
+    let s = solve_batch(&g, &options).expect("solvable");
     let switches = s.switches.expect("the robust polish gives switches");
     let first_wrong = g.edges().len() - wrong.len();
     for (e, &sw) in switches.iter().enumerate() {
@@ -279,7 +279,7 @@ fn the_engine_streams_a_3d_graph_to_the_batch_optimum() {
     let mut clean = g.clone();
     let true_edges = clean.edges()[..last].to_vec();
     clean = PoseGraph::from_parts(clean.keyframes().to_vec(), true_edges).expect("same keyframes");
-    let best = solve_batch3(
+    let best = solve_batch(
         &clean,
         &BatchOptions {
             polish: true,

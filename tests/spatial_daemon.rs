@@ -4,7 +4,7 @@
 
 use crate::daemon::Daemon;
 use slamd::graph::{EdgeKind, Pose3};
-use slamd::solver::{solve_batch3, BatchOptions};
+use slamd::solver::{solve_batch, BatchOptions};
 use slamd::synthetic::{generate3, WorldParams};
 use slamd_client::{Frontend, RejectionReason, SnapshotHeader, Snapshots};
 use slamd_tests::slamd_bin;
@@ -55,7 +55,7 @@ fn a_building_streams_through_a_3d_daemon_and_survives_a_restart() {
     let n = g.len();
     let loops = g.edges().iter().filter(|e| e.kind != EdgeKind::Odometry).count();
     assert!(loops >= 5, "the world closes loops: {loops}");
-    let best = solve_batch3(
+    let best = solve_batch(
         g,
         &BatchOptions {
             polish: true,

@@ -116,7 +116,7 @@ pub struct BatchOptions {
     pub robust: Option<OutlierConfig>,
 }
 
-/// What [`solve_batch`] (or [`solve_batch3`]) found.
+/// What [`solve_batch`] found.
 #[derive(Clone, Debug)]
 pub struct BatchSolution<P: LiePose = Pose2> {
     /// Final poses, indexed like the graph.
@@ -148,8 +148,47 @@ impl<P: LiePose> BatchSolution<P> {
     }
 }
 
-/// Solves a whole graph at once.
-pub fn solve_batch(graph: &PoseGraph, options: &BatchOptions) -> Result<BatchSolution, SolveError> {
+/// A pose type a whole graph can be solved in.
+pub trait BatchPose: LiePose {
+    /// [`solve_batch`] on a graph of this pose type.
+    fn solve_batch(
+        graph: &PoseGraph<Self>,
+        options: &BatchOptions,
+    ) -> Result<BatchSolution<Self>, SolveError>;
+}
+
+impl BatchPose for Pose2 {
+    fn solve_batch(
+        graph: &PoseGraph<Self>,
+        options: &BatchOptions,
+    ) -> Result<BatchSolution<Self>, SolveError> {
+        solve_planar(graph, options)
+    }
+}
+
+impl BatchPose for Pose3 {
+    fn solve_batch(
+        graph: &PoseGraph<Self>,
+        options: &BatchOptions,
+    ) -> Result<BatchSolution<Self>, SolveError> {
+        solve_spatial(graph, options)
+    }
+}
+
+/// Solves a whole graph at once: the linear initialiser the options name
+/// (in 3-D the chordal one), then optionally the polish on g2o's cost, or
+/// the robust polish (from the initialiser and from odometry alone). GPS,
+/// the virtual-frame formulations, the cycle test and PCM are planar only
+/// ([`SolveError::Unsupported`] in 3-D).
+pub fn solve_batch<P: BatchPose>(
+    graph: &PoseGraph<P>,
+    options: &BatchOptions,
+) -> Result<BatchSolution<P>, SolveError> {
+    P::solve_batch(graph, options)
+}
+
+/// [`solve_batch`] in the plane.
+fn solve_planar(graph: &PoseGraph, options: &BatchOptions) -> Result<BatchSolution, SolveError> {
     graph.check_connected()?;
     let start = Instant::now();
     let gps = options.gps.as_ref().map(|g| calibrated(graph, g)).transpose()?;
@@ -190,7 +229,7 @@ pub fn solve_batch(graph: &PoseGraph, options: &BatchOptions) -> Result<BatchSol
         let mut starts = vec![poses.clone()];
         starts.extend(odometry_chain(graph));
         // a batch solve has the machine: the starts are probed two at a time
-        let held_out = if filter.enabled && filter.pairwise {
+        let held_out = if filter.pcm() {
             let mut pcm = ConsistencyGraph::default();
             pcm.update(
                 graph.len(),
@@ -262,11 +301,10 @@ pub fn solve_batch(graph: &PoseGraph, options: &BatchOptions) -> Result<BatchSol
     })
 }
 
-/// Solves a whole 3-D graph at once: the chordal two-stage initialiser
-/// (or odometry), then optionally the polish on g2o's SE(3) cost, or the
-/// robust polish (DCS at six degrees of freedom unless the kernel is
-/// set; from the initialiser and from odometry alone).
-pub fn solve_batch3(
+/// [`solve_batch`] in space: the chordal two-stage initialiser (or
+/// odometry), then optionally the polish on g2o's SE(3) cost, or the
+/// robust polish (DCS at six degrees of freedom unless the kernel is set).
+fn solve_spatial(
     graph: &PoseGraph<Pose3>,
     options: &BatchOptions,
 ) -> Result<BatchSolution<Pose3>, SolveError> {
@@ -287,7 +325,7 @@ pub fn solve_batch3(
     let start = Instant::now();
     let (mut report, mut switches) = (None, None);
     let poses = if let Some(filter) = &options.robust {
-        if filter.enabled && (filter.cycles || filter.pairwise) {
+        if filter.planar_only() {
             return Err(SolveError::Unsupported("the cycle test and PCM"));
         }
         let mut filter = *filter;

@@ -7,7 +7,7 @@ use pyo3::prelude::*;
 use slamd::graph::{InformationMatrix, PoseGraph};
 use slamd::io::{read_any_graph_with, AnyGraph, OnInvalid};
 use slamd::outliers::OutlierConfig;
-use slamd::solver::{solve_batch, solve_batch3, BatchOptions, BatchSolution, Formulation};
+use slamd::solver::{solve_batch, BatchOptions, BatchSolution, Formulation};
 use std::path::PathBuf;
 
 /// A pose graph read from a file: keyframes and edges, 2-D or 3-D.
@@ -206,7 +206,7 @@ pub fn solve(
             solution(py, g, s)
         }
         AnyGraph::Spatial(g) => {
-            let s = py.detach(|| solve_batch3(g, &options)).map_err(error)?;
+            let s = py.detach(|| solve_batch(g, &options)).map_err(error)?;
             solution(py, g, s)
         }
     }

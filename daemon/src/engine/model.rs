@@ -261,7 +261,7 @@ impl<P: EnginePose> Model<P> {
     /// among them ([`ConsistencyGraph`]), when the filter asks for it
     /// (else none: an empty list).
     fn held_out(&self, filter: &OutlierConfig, ids: &[usize], switchable: &[bool]) -> Vec<bool> {
-        if !(filter.enabled && filter.pairwise) {
+        if !filter.pcm() {
             return Vec::new();
         }
         P::pairwise_held_out(&self.consistency, &self.graph, filter, ids, switchable)

@@ -249,8 +249,7 @@ impl EnginePose for Pose3 {
     }
 
     fn check(config: &EngineConfig) -> Result<(), String> {
-        let o = &config.outliers;
-        if o.enabled && (o.cycles || o.pairwise) {
+        if config.outliers.planar_only() {
             return Err("the cycle test and PCM (outliers.cycles, outliers.pairwise) are planar; turn them off for 3-D graphs".into());
         }
         Ok(())

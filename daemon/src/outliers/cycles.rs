@@ -205,7 +205,7 @@ fn key(a: usize, b: usize) -> (usize, usize) {
 /// for it (over keyframes `0..n`), else none: a held-out mask for
 /// [`super::robust_polish`].
 pub fn rejected(n: usize, edges: &[Edge], switchable: &[bool], config: &super::OutlierConfig) -> Vec<bool> {
-    if !(config.enabled && config.cycles) {
+    if !config.cycle_test() {
         return Vec::new();
     }
     let usable = vec![true; edges.len()];

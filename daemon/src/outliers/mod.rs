@@ -164,6 +164,22 @@ impl OutlierConfig {
     pub fn switchable<P: crate::graph::RigidMotion>(&self, edge: &Edge<P>) -> bool {
         self.enabled && edge.kind.switchable()
     }
+
+    /// PCM picks the loop closures first: enabled with `pairwise`.
+    pub fn pcm(&self) -> bool {
+        self.enabled && self.pairwise
+    }
+
+    /// Paper A's cycle test runs: enabled with `cycles`.
+    pub fn cycle_test(&self) -> bool {
+        self.enabled && self.cycles
+    }
+
+    /// A planar-only check is on (the cycle test or PCM), which a 3-D
+    /// graph refuses.
+    pub fn planar_only(&self) -> bool {
+        self.pcm() || self.cycle_test()
+    }
 }
 
 /// A switch below this counts as a rejection (`rejected_edges`).

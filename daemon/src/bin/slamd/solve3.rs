@@ -8,7 +8,7 @@ use slamd::geometry::Pose2;
 use slamd::graph::{Pose3, PoseGraph};
 use slamd::io::{self, svg};
 use slamd::outliers::OutlierConfig;
-use slamd::solver::{solve_batch3, BatchOptions};
+use slamd::solver::{solve_batch, BatchOptions};
 
 pub fn run(opts: &SolveOpts, graph: &PoseGraph<Pose3>, skipped: serde_json::Value) -> anyhow::Result<()> {
     if opts.gps.gps.is_some() {
@@ -28,7 +28,7 @@ pub fn run(opts: &SolveOpts, graph: &PoseGraph<Pose3>, skipped: serde_json::Valu
         robust: opts.robust.then(|| opts.filter.apply(OutlierConfig::default())),
         ..Default::default()
     };
-    let sol = solve_batch3(graph, &options).with_context(|| format!("solving {}", opts.file.display()))?;
+    let sol = solve_batch(graph, &options).with_context(|| format!("solving {}", opts.file.display()))?;
     let ate = truth.as_ref().and_then(|t| ate(graph, &sol.poses, t));
     if let Some(out) = &opts.out {
         let file = std::fs::File::create(out).with_context(|| format!("creating {}", out.display()))?;

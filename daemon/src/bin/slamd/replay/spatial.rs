@@ -7,7 +7,7 @@ use anyhow::bail;
 use slamd::config::Config;
 use slamd::graph::{Pose3, PoseGraph};
 use slamd::io;
-use slamd::solver::{solve_batch3, BatchOptions};
+use slamd::solver::{solve_batch, BatchOptions};
 
 pub fn run(
     opts: &ReplayOpts,
@@ -46,7 +46,7 @@ pub fn run(
             polish: true,
             ..Default::default()
         };
-        Ok(solve_batch3(prefix, &options)?.chi2)
+        Ok(solve_batch(prefix, &options)?.chi2)
     })?;
     if opts.json {
         println!(
