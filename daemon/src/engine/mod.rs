@@ -145,8 +145,10 @@ impl<P: EnginePose> Engine<P> {
     /// An engine that applies its own outlier filter, if on.
     fn whole(mut config: EngineConfig) -> Self {
         config.outliers = config.outliers.for_dof(P::DOF);
-        if let Err(reason) = P::check(&config) {
-            tracing::warn!(%reason, "Turned off.");
+        if P::DIMENSION != 2 && config.outliers.planar_only() {
+            tracing::warn!(
+                "The cycle test and PCM (outliers.cycles, outliers.pairwise) are planar; turned off for 3-D graphs."
+            );
             config.outliers.cycles = false;
             config.outliers.pairwise = false;
         }

@@ -14,6 +14,7 @@ use crate::outliers::consistency::ConsistencyGraph;
 use crate::outliers::cycles;
 use crate::outliers::{robust_polish, OutlierConfig, RobustEdges, OFF_BELOW, REJECTED_BELOW};
 use slamd_protocol::codec::Origin;
+use std::any::Any;
 use std::collections::HashMap;
 use std::sync::atomic::AtomicBool;
 use std::sync::{Arc, Mutex};
@@ -223,9 +224,14 @@ impl<P: EnginePose> Model<P> {
             .map(|&e| filter.switchable(&self.graph.edges()[e]))
             .collect();
         let initial: Vec<P> = joined.iter().map(|&k| lin[k]).collect();
+        // paper A's cycle test, on planar graphs
+        let cycle_rejected = (&edges as &dyn Any)
+            .downcast_ref::<Vec<Edge>>()
+            .map(|edges| cycles::rejected(initial.len(), edges, &switchable, filter));
+        debug_assert!(P::DIMENSION != 2 || cycle_rejected.is_some());
         let held_out = cycles::either(
             self.held_out(filter, &ids, &switchable),
-            P::cycle_rejected(initial.len(), &edges, &switchable, filter),
+            cycle_rejected.unwrap_or_default(),
         );
         let starts = self.starts(config, compact, joined, &initial, &ids, polish);
         let threads = if matches!(polish, Polish::FullInline | Polish::Closing) {
@@ -258,13 +264,23 @@ impl<P: EnginePose> Model<P> {
 
     /// Which of the edges `ids` (graph indices; `switchable` alike) PCM
     /// holds out: the switchable ones outside the largest consistent set
-    /// among them ([`ConsistencyGraph`]), when the filter asks for it
-    /// (else none: an empty list).
+    /// among them ([`ConsistencyGraph`]), when the filter asks for it and
+    /// the graph is planar (else none: an empty list).
     fn held_out(&self, filter: &OutlierConfig, ids: &[usize], switchable: &[bool]) -> Vec<bool> {
-        if !filter.pcm() {
+        let planar = (&self.graph as &dyn Any).downcast_ref::<PoseGraph>();
+        debug_assert!(P::DIMENSION != 2 || planar.is_some());
+        let (true, Some(graph)) = (filter.pcm(), planar) else {
             return Vec::new();
-        }
-        P::pairwise_held_out(&self.consistency, &self.graph, filter, ids, switchable)
+        };
+        let edges = graph.edges();
+        let mut pcm = self.consistency.lock().unwrap_or_else(|e| e.into_inner());
+        pcm.update(
+            graph.len(),
+            edges,
+            |e| filter.switchable(&edges[e]),
+            filter.pairwise_chi2,
+        );
+        pcm.held_out(ids, switchable)
     }
 
     /// The starts of [`Self::robust_polish`] (`ids`: the graph indices of

@@ -1,28 +1,23 @@
 //! [`EnginePose`]: what the incremental engine needs of a pose type beyond
 //! the polish's [`LiePose`], so that one engine serves SE(2) and SE(3).
 //!
-//! Each item is either the same math written for one dimension (the
-//! whitened rows of an edge, its innovation test, the linear initialiser a
-//! re-solve starts from) or a feature only the plane has so far (the
-//! cycle test and PCM), which the
-//! spatial pose declines: [`EnginePose::check`] names them and
-//! [`Engine::create`](super::Engine::create) turns them off with a
-//! warning, so they are never asked for.
+//! Each item is the same math written for one dimension: the whitened
+//! rows of an edge, its innovation test, the linear initialiser a re-solve
+//! starts from. What only the plane has so far (the cycle test and PCM,
+//! [`OutlierConfig::planar_only`](crate::outliers::OutlierConfig::planar_only))
+//! is not asked of the pose type: [`Engine::create`](super::Engine::create)
+//! turns it off with a warning in 3-D.
 
-use super::EngineConfig;
 use crate::geometry::{Pose2, Turns};
 use crate::gps::GpsPose;
 use crate::graph::{edge_error_turned, Edge, Pose3, PoseGraph};
 use crate::linear::{chordal, two_stage};
 use crate::nonlinear::{se2, se3, LiePose, PositionPrior};
-use crate::outliers::consistency::ConsistencyGraph;
-use crate::outliers::{cycles, OutlierConfig};
 use nalgebra::{Matrix3, Matrix6, SMatrix, Vector2, Vector3, Vector6};
 use std::ops::Index;
-use std::sync::Mutex;
 
 /// A pose type the engine can run on.
-pub trait EnginePose: LiePose + GpsPose {
+pub trait EnginePose: LiePose + GpsPose + 'static {
     /// `Lᵀ J`, `DOF × 2·DOF`, with `Ω = L Lᵀ`.
     type Rows: Index<(usize, usize), Output = f64>;
     /// `−Lᵀ e`, `DOF` long.
@@ -62,26 +57,6 @@ pub trait EnginePose: LiePose + GpsPose {
     /// The linear initialiser's solution of `graph` (gauge at the
     /// identity): a re-solve's start that does not depend on the estimate.
     fn linear_solution(graph: &PoseGraph<Self>) -> Option<Vec<Self>>;
-
-    /// The switchable edges paper A's cycle test rejects (planar only).
-    fn cycle_rejected(
-        n: usize,
-        edges: &[Edge<Self>],
-        switchable: &[bool],
-        config: &OutlierConfig,
-    ) -> Vec<bool>;
-
-    /// The edges `ids` PCM holds out (planar only).
-    fn pairwise_held_out(
-        consistency: &Mutex<ConsistencyGraph>,
-        graph: &PoseGraph<Self>,
-        filter: &OutlierConfig,
-        ids: &[usize],
-        switchable: &[bool],
-    ) -> Vec<bool>;
-
-    /// Why `config` cannot run on this dimension, if it cannot.
-    fn check(config: &EngineConfig) -> Result<(), String>;
 }
 
 /// A square root `L` of an information matrix, `Ω = L Lᵀ` (Cholesky; the
@@ -157,32 +132,6 @@ impl EnginePose for Pose2 {
     fn linear_solution(graph: &PoseGraph) -> Option<Vec<Pose2>> {
         two_stage::solve(graph).ok()
     }
-
-    fn cycle_rejected(n: usize, edges: &[Edge], switchable: &[bool], config: &OutlierConfig) -> Vec<bool> {
-        cycles::rejected(n, edges, switchable, config)
-    }
-
-    fn pairwise_held_out(
-        consistency: &Mutex<ConsistencyGraph>,
-        graph: &PoseGraph,
-        filter: &OutlierConfig,
-        ids: &[usize],
-        switchable: &[bool],
-    ) -> Vec<bool> {
-        let edges = graph.edges();
-        let mut pcm = consistency.lock().unwrap_or_else(|e| e.into_inner());
-        pcm.update(
-            graph.len(),
-            edges,
-            |e| filter.switchable(&edges[e]),
-            filter.pairwise_chi2,
-        );
-        pcm.held_out(ids, switchable)
-    }
-
-    fn check(_: &EngineConfig) -> Result<(), String> {
-        Ok(())
-    }
 }
 
 impl EnginePose for Pose3 {
@@ -232,26 +181,5 @@ impl EnginePose for Pose3 {
 
     fn linear_solution(graph: &PoseGraph<Pose3>) -> Option<Vec<Pose3>> {
         chordal::solve(graph).ok()
-    }
-
-    fn cycle_rejected(_: usize, _: &[Edge<Pose3>], _: &[bool], _: &OutlierConfig) -> Vec<bool> {
-        Vec::new()
-    }
-
-    fn pairwise_held_out(
-        _: &Mutex<ConsistencyGraph>,
-        _: &PoseGraph<Pose3>,
-        _: &OutlierConfig,
-        _: &[usize],
-        _: &[bool],
-    ) -> Vec<bool> {
-        Vec::new()
-    }
-
-    fn check(config: &EngineConfig) -> Result<(), String> {
-        if config.outliers.planar_only() {
-            return Err("the cycle test and PCM (outliers.cycles, outliers.pairwise) are planar; turn them off for 3-D graphs".into());
-        }
-        Ok(())
     }
 }
