@@ -100,7 +100,7 @@ fn solve_with_ground_truth_reports_ate_and_writes_outputs() {
     ]);
     assert!(v["ate"].as_f64().expect("ate") < 2.0);
     // The written g2o reads back with the same χ².
-    let back = slamd::io::read_graph(&out).expect("readable");
+    let back: slamd::graph::PoseGraph = slamd::io::read_graph(&out).expect("readable");
     let poses: Vec<_> = back
         .keyframes()
         .iter()

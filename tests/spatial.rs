@@ -131,7 +131,7 @@ proptest! {
 /// Sphere2500 reaches g2o's published optimum, 727.15, from nothing.
 #[test]
 fn sphere2500_reaches_the_published_optimum() {
-    let g = slamd::io::read_graph3(&slamd_tests::dataset("3d/sphere2500.g2o")).expect("readable");
+    let g = slamd::io::read_graph::<Pose3>(&slamd_tests::dataset("3d/sphere2500.g2o")).expect("readable");
     let options = BatchOptions {
         polish: true,
         ..Default::default()

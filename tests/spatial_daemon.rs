@@ -5,7 +5,7 @@
 use crate::daemon::Daemon;
 use slamd::graph::{EdgeKind, Pose3};
 use slamd::solver::{solve_batch, BatchOptions};
-use slamd::synthetic::{generate3, WorldParams};
+use slamd::synthetic::{generate_building, WorldParams};
 use slamd_client::{Frontend, RejectionReason, SnapshotHeader, Snapshots};
 use slamd_tests::slamd_bin;
 use std::process::{Command, Stdio};
@@ -43,7 +43,7 @@ fn wait_until(
 
 #[test]
 fn a_building_streams_through_a_3d_daemon_and_survives_a_restart() {
-    let world = generate3(
+    let world = generate_building(
         &WorldParams {
             poses: 300,
             seed: 7,

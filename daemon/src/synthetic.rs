@@ -9,7 +9,7 @@
 //! are the true relative poses plus Gaussian noise with the σ's below, and
 //! every edge carries the matching information. The city's side grows with
 //! √poses so that revisits stay frequent at any size (tests use hundreds of
-//! poses, scale benchmarks up to 1,000,000). In 3-D ([`generate3`]) the same
+//! poses, scale benchmarks up to 1,000,000). In 3-D ([`generate_building`]) the same
 //! drive climbs a building, a floor at a time. [`gps_fixes`] places a
 //! world on the globe and takes noisy GPS fixes of its true positions.
 
@@ -58,13 +58,14 @@ impl Default for WorldParams {
     }
 }
 
-/// A generated world: the graph (edges in time order) and the truth.
+/// A generated world: the graph (edges in time order) and the truth, in
+/// the plane ([`generate`]) or in space ([`generate_building`]).
 #[derive(Clone, Debug)]
-pub struct World {
+pub struct World<P: RigidMotion = Pose2> {
     /// Keyframes `0..poses` and their noisy edges.
-    pub graph: PoseGraph,
+    pub graph: PoseGraph<P>,
     /// The true pose of every keyframe; keyframe 0 at the origin.
-    pub truth: Vec<Pose2>,
+    pub truth: Vec<P>,
 }
 
 /// A standard normal sample (Box–Muller).
@@ -174,19 +175,10 @@ fn drive_edges<P: RigidMotion>(
     graph
 }
 
-/// A generated 3-D world: a building of storeys joined by a lift.
-#[derive(Clone, Debug)]
-pub struct World3 {
-    /// Keyframes `0..poses` and their noisy edges.
-    pub graph: PoseGraph<Pose3>,
-    /// The true pose of every keyframe; keyframe 0 at the origin.
-    pub truth: Vec<Pose3>,
-}
-
-/// Storey height of [`generate3`]'s building (m).
+/// Storey height of [`generate_building`]'s building (m).
 pub const STOREY: f64 = 3.0;
 
-/// How many times better [`generate3`]'s roll and pitch are measured
+/// How many times better [`generate_building`]'s roll and pitch are measured
 /// than its heading.
 pub const GRAVITY_ALIGNED: f64 = 10.0;
 
@@ -199,7 +191,7 @@ pub const GRAVITY_ALIGNED: f64 = 10.0;
 /// carries noise of σ `sigma_xy` per axis, `sigma_theta` in yaw and
 /// `sigma_theta / GRAVITY_ALIGNED` in roll and pitch, and the matching
 /// information.
-pub fn generate3(params: &WorldParams, storeys: usize) -> World3 {
+pub fn generate_building(params: &WorldParams, storeys: usize) -> World<Pose3> {
     let storeys = storeys.max(1);
     let plan = generate(params).truth;
     let n = plan.len();
@@ -246,7 +238,7 @@ pub fn generate3(params: &WorldParams, storeys: usize) -> World3 {
         t.compose(&Pose3::from_xyz_rpy(d))
     };
     let graph = drive_edges(&truth, params, &mut rng, info, noisy);
-    World3 { graph, truth }
+    World { graph, truth }
 }
 
 /// Where a synthetic world lies on the globe and how its GPS is taken.
@@ -330,7 +322,7 @@ mod tests {
             poses: 1500,
             ..Default::default()
         };
-        let w = generate3(&p, 3);
+        let w = generate_building(&p, 3);
         assert_eq!(w.graph.len(), 1500);
         // three floors, 3 m apart, two rides up and one down to the ground
         // floor
@@ -362,7 +354,7 @@ mod tests {
             let dz = w.truth[e.from].translation.z - w.truth[e.to].translation.z;
             assert!(dz.abs() < 1e-9, "a loop closure across floors");
         }
-        assert_eq!(generate3(&p, 3).graph.edges(), w.graph.edges());
+        assert_eq!(generate_building(&p, 3).graph.edges(), w.graph.edges());
     }
 
     #[test]

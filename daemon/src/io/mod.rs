@@ -144,10 +144,45 @@ pub enum OnInvalid {
     Skip,
 }
 
-/// Reads a graph file, detecting its format; refuses it with the first
-/// line that does not parse, else the first that breaks the graph.
-pub fn read_graph(path: &Path) -> Result<PoseGraph, ReadError> {
-    read_graph_with(path, OnInvalid::Refuse).map(|(graph, _)| graph)
+/// Reads a graph file of dimension `P` (a [`Pose2`] or [`Pose3`] graph),
+/// detecting its format; refuses it with the first line that does not
+/// parse, else the first that breaks the graph, and a file of the other
+/// dimension.
+pub fn read_graph<P: FilePose>(path: &Path) -> Result<PoseGraph<P>, ReadError> {
+    let (any, _) = read_any_graph_with(path, OnInvalid::Refuse)?;
+    P::of(any).map_err(|other| ReadError {
+        path: path.to_owned(),
+        line: None,
+        kind: ReadErrorKind::Malformed(format!(
+            "a {}-D pose graph where a {}-D one is needed",
+            other.dimension(),
+            P::DIMENSION
+        )),
+    })
+}
+
+/// A pose type whose graphs files hold: [`read_graph`] reads them.
+pub trait FilePose: RigidMotion {
+    /// The graph `any` holds when it is of this dimension, else `any`.
+    fn of(any: AnyGraph) -> Result<PoseGraph<Self>, AnyGraph>;
+}
+
+impl FilePose for Pose2 {
+    fn of(any: AnyGraph) -> Result<PoseGraph<Self>, AnyGraph> {
+        match any {
+            AnyGraph::Planar(g) => Ok(g),
+            other => Err(other),
+        }
+    }
+}
+
+impl FilePose for Pose3 {
+    fn of(any: AnyGraph) -> Result<PoseGraph<Self>, AnyGraph> {
+        match any {
+            AnyGraph::Spatial(g) => Ok(g),
+            other => Err(other),
+        }
+    }
 }
 
 /// Reads a graph file, detecting its format. Returns the graph and, with
@@ -191,6 +226,16 @@ pub enum AnyGraph {
     Spatial(PoseGraph<Pose3>),
 }
 
+impl AnyGraph {
+    /// 2 or 3.
+    pub fn dimension(&self) -> u32 {
+        match self {
+            AnyGraph::Planar(_) => 2,
+            AnyGraph::Spatial(_) => 3,
+        }
+    }
+}
+
 /// Reads a graph file of either dimension, detecting its format; with
 /// [`OnInvalid::Skip`] returns the lines left out.
 pub fn read_any_graph_with(
@@ -225,18 +270,6 @@ pub fn read_any_graph_with(
         Dimension::Spatial => {
             parse_graph3_with(path, &text, format, on_invalid).map(|(g, s)| (AnyGraph::Spatial(g), s))
         }
-    }
-}
-
-/// Reads a 3-D graph file, detecting its format; refuses a 2-D one.
-pub fn read_graph3(path: &Path) -> Result<PoseGraph<Pose3>, ReadError> {
-    match read_any_graph_with(path, OnInvalid::Refuse)? {
-        (AnyGraph::Spatial(g), _) => Ok(g),
-        (AnyGraph::Planar(_), _) => Err(ReadError {
-            path: path.to_owned(),
-            line: None,
-            kind: ReadErrorKind::Malformed("a 2-D pose graph where a 3-D one is needed".into()),
-        }),
     }
 }
 

@@ -84,7 +84,7 @@ impl TruthPose for Pose2 {
 
 impl TruthPose for Pose3 {
     fn read_ground_truth(path: &Path) -> Result<HashMap<KeyframeId, Pose3>, ReadError> {
-        let graph = super::read_graph3(path)?;
+        let graph = super::read_graph::<Pose3>(path)?;
         let poses = graph.initial_guess().map_err(|e| ReadError::graph(path, e))?;
         Ok(by_id(&graph, poses))
     }

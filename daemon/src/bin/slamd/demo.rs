@@ -14,7 +14,7 @@ use slamd::eval::{aligned_onto, ate, Aligned};
 use slamd::geometry::Pose2;
 use slamd::graph::{chi2, KeyframeId, Pose3, PoseGraph};
 use slamd::io::{svg, AnyGraph, OnInvalid};
-use slamd::synthetic::{generate, generate3, gps_fixes, GpsParams, WorldParams};
+use slamd::synthetic::{generate, generate_building, gps_fixes, GpsParams, WorldParams};
 use std::collections::HashMap;
 use std::path::PathBuf;
 use std::process::{Child, Command, Stdio};
@@ -159,7 +159,7 @@ pub fn run(opts: DemoOpts) -> anyhow::Result<()> {
             show(&opts, &name, &w.graph, Some(&truth))
         }
         (None, true) => {
-            let w = generate3(&params, opts.storeys);
+            let w = generate_building(&params, opts.storeys);
             let truth = by_id(&w.graph, w.truth);
             let name = format!(
                 "synthetic building, {} storeys (seed {})",

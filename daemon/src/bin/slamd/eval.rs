@@ -31,7 +31,7 @@ pub fn run(opts: EvalOpts) -> anyhow::Result<()> {
             let table = if let Some(layout) = io::Trajectory::of(&opts.poses) {
                 io::read_trajectory(&opts.poses, layout, &crate::solve::keyframe_ids(&graph))?
             } else if opts.poses.extension().is_some_and(|e| e == "g2o") {
-                vertices(&io::read_graph(&opts.poses)?)
+                vertices(&io::read_graph::<slamd::geometry::Pose2>(&opts.poses)?)
             } else {
                 io::read_pose_table(&opts.poses)?
             };
@@ -48,7 +48,7 @@ pub fn run(opts: EvalOpts) -> anyhow::Result<()> {
             let table = if let Some(layout) = io::Trajectory::of(&opts.poses) {
                 io::read_trajectory(&opts.poses, layout, &crate::solve::keyframe_ids(&graph))?
             } else if opts.poses.extension().is_some_and(|e| e == "g2o") {
-                vertices(&io::read_graph3(&opts.poses)?)
+                vertices(&io::read_graph::<Pose3>(&opts.poses)?)
             } else {
                 read_table3(&opts.poses)?
             };

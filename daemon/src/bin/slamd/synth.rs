@@ -2,7 +2,7 @@
 
 use anyhow::Context;
 use clap::Args;
-use slamd::synthetic::{generate, generate3, WorldParams};
+use slamd::synthetic::{generate, generate_building, WorldParams};
 use std::io::Write;
 use std::path::PathBuf;
 
@@ -43,7 +43,7 @@ pub fn run(opts: SynthOpts) -> anyhow::Result<()> {
         ..Default::default()
     };
     if opts.spatial {
-        let world = generate3(&params, opts.storeys);
+        let world = generate_building(&params, opts.storeys);
         let guess = world.graph.compose_spanning_tree()?;
         let mut g = create(&opts.out)?;
         slamd::io::write_g2o(&mut g, &world.graph, &guess)?;
