@@ -54,6 +54,11 @@ pub struct ViewOpts {
     /// Frames published per second at most.
     #[arg(long, default_value_t = 10.0)]
     pub rate: f64,
+    /// Frames recorded per second at most: every frame carries the whole
+    /// map, so a recording at the live rate grows by megabytes a second
+    /// on a large map. The last frame is always recorded.
+    #[arg(long, default_value_t = 1.0)]
+    pub record_rate: f64,
 }
 
 /// The topics, as Foxglove and the page subscribe to them.
@@ -154,15 +159,17 @@ impl ServerListener for OnSubscribe {
 const SAY_EVERY: Duration = Duration::from_secs(5);
 
 pub fn run(opts: ViewOpts) -> anyhow::Result<()> {
-    anyhow::ensure!(
-        opts.rate.is_finite() && opts.rate > 0.0,
-        "--rate must be a positive number of frames per second"
-    );
+    for (flag, rate) in [("--rate", opts.rate), ("--record-rate", opts.record_rate)] {
+        anyhow::ensure!(
+            rate.is_finite() && rate > 0.0,
+            "{flag} must be a positive number of frames per second"
+        );
+    }
     let config = crate::run::load_config(None, opts.namespace.as_deref())?;
     let namespace = config.namespace.clone();
     crate::signals::catch();
     let ctx = Context::new();
-    let channels = Channels::new(&ctx)?;
+    let mut live = Sink::new(&ctx, opts.rate)?;
     let resend = Arc::new(AtomicBool::new(false));
     let server = WebSocketServer::new()
         .name(format!("slamd {namespace}"))
@@ -178,11 +185,14 @@ pub fn run(opts: ViewOpts) -> anyhow::Result<()> {
             .with_context(|| format!("serving the page on {}:{}", opts.host, opts.page_port))?;
         println!("page: http://{}:{port}/", opts.host);
     }
-    let recording = match &opts.record {
+    // the recording has a context and channels of its own, published at
+    // its own rate; the context lives as long as the recording
+    let record_ctx = Context::new();
+    let writer = match &opts.record {
         Some(path) => {
             let options = McapWriteOptions::default().compression(Some(McapCompression::Lz4));
             let w = McapWriter::with_options(options)
-                .context(&ctx)
+                .context(&record_ctx)
                 .create_new_buffered_file(path)
                 .with_context(|| format!("recording to {}", path.display()))?;
             println!("recording: {}", path.display());
@@ -190,37 +200,90 @@ pub fn run(opts: ViewOpts) -> anyhow::Result<()> {
         }
         None => None,
     };
+    let mut recorder = match writer {
+        Some(_) => Some(Sink::new(&record_ctx, opts.record_rate)?),
+        None => None,
+    };
     let _ = std::io::stdout().flush();
 
-    let period = Duration::from_secs_f64(1.0 / opts.rate);
-    let frames = serve(&namespace, &channels, &resend, period);
-    if let Some(w) = recording {
+    let served = serve(&namespace, &mut live, recorder.as_mut(), &resend);
+    if let Some(w) = writer {
         w.close().context("closing the recording")?;
     }
     server.stop().wait_blocking();
-    println!("frames: {}", frames?);
+    served?;
+    match recorder {
+        Some(r) => println!("frames: {}, recorded: {}", live.frames, r.frames),
+        None => println!("frames: {}", live.frames),
+    }
     Ok(())
+}
+
+/// One set of channels and how often it gets a frame.
+struct Sink {
+    channels: Channels,
+    period: Duration,
+    last: Option<Instant>,
+    /// A frame came that this sink has not published.
+    behind: bool,
+    frames: u64,
+}
+
+impl Sink {
+    fn new(ctx: &Arc<Context>, rate: f64) -> anyhow::Result<Self> {
+        Ok(Self {
+            channels: Channels::new(ctx)?,
+            period: Duration::from_secs_f64(1.0 / rate),
+            last: None,
+            behind: false,
+            frames: 0,
+        })
+    }
+
+    /// Publishes `frame` if one came since the last and the period has
+    /// passed (or, with `now`, at once).
+    fn publish(&mut self, frame: &Frame, status: Option<&DaemonStatus>, now: bool) {
+        let due = now || self.last.is_none_or(|t| t.elapsed() >= self.period);
+        if self.behind && due && frame.header.version > 0 {
+            self.channels.publish(frame, status);
+            self.frames += 1;
+            self.last = Some(Instant::now());
+            self.behind = false;
+        }
+    }
+
+    /// How long until this sink may publish again.
+    fn rest(&self) -> Duration {
+        self.last
+            .map_or(Duration::ZERO, |t| self.period.saturating_sub(t.elapsed()))
+    }
 }
 
 /// Reads the daemon on `namespace` and publishes what it reads, until
 /// SIGINT or SIGTERM; then publishes what came since the last frame. A
 /// daemon silent for [`SILENT`] is looked for anew (a restarted daemon
-/// serves new services). Returns the number of frames published.
-fn serve(namespace: &str, channels: &Channels, resend: &AtomicBool, period: Duration) -> anyhow::Result<u64> {
-    let mut frames = 0;
+/// serves new services). The recording, if any, gets every
+/// `record`-period's newest frame, and the last one.
+fn serve(
+    namespace: &str,
+    live: &mut Sink,
+    mut record: Option<&mut Sink>,
+    resend: &AtomicBool,
+) -> anyhow::Result<()> {
     let mut frame = Frame::default();
     let mut status = None;
     while let Some(link) = connect(namespace) {
         tracing::info!(namespace, "Viewing.");
-        let mut last = Instant::now() - period;
         let mut heard = Instant::now();
         loop {
             let stopping = crate::signals::stopped();
-            let mut changed = resend.swap(false, Ordering::AcqRel);
+            // a new client sees the map at once
+            live.behind |= resend.swap(false, Ordering::AcqRel);
+            let mut changed = false;
             if let Some(s) = link.wait(if stopping {
                 Duration::ZERO
             } else {
-                period.min(LOOK)
+                live.period.min(LOOK)
             })? {
                 frame.header = *s.header();
                 frame.poses.clear();
@@ -235,25 +298,26 @@ fn serve(namespace: &str, channels: &Channels, resend: &AtomicBool, period: Dura
             if let Some(s) = link.status()? {
                 status = Some(s);
                 heard = Instant::now();
-                channels.publish_health(&frame, status.as_ref());
+                live.channels.publish_health(&frame, status.as_ref());
             }
-            if changed && frame.header.version > 0 {
-                channels.publish(&frame, status.as_ref());
-                frames += 1;
-                last = Instant::now();
+            live.behind |= changed;
+            live.publish(&frame, status.as_ref(), stopping);
+            if let Some(r) = record.as_deref_mut() {
+                r.behind |= changed;
+                r.publish(&frame, status.as_ref(), stopping);
             }
             if stopping {
-                return Ok(frames);
+                return Ok(());
             }
             if heard.elapsed() > SILENT {
                 eprintln!("slamd view: the daemon on `{namespace}` fell silent; looking for it again");
                 break;
             }
-            // at most one frame per period: sleep out its rest
-            crate::signals::sleep(period.saturating_sub(last.elapsed()));
+            // at most one live frame per period: sleep out its rest
+            crate::signals::sleep(live.rest());
         }
     }
-    Ok(frames)
+    Ok(())
 }
 
 /// A daemon publishes its status on every tick (250 ms by default); one
