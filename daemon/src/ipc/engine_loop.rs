@@ -2,7 +2,7 @@
 //! for missing keyframes, journals what it took and publishes one snapshot
 //! per batch (its state directory is in [`super::durable`]).
 
-use super::durable::Durability;
+use super::durability::{now_ns, Durability};
 use super::health::Latency;
 use super::held::{Held, Waiting};
 use crate::config::Config;
@@ -19,7 +19,7 @@ use slamd_protocol::{
     DaemonStatus, Rejection, RejectionReason, SnapshotHeader, SwitchesHeader, INFORMATION_UPPER,
     PROTOCOL_VERSION,
 };
-use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+use std::time::{Duration, Instant};
 
 /// What the IPC thread hands over; `P` is the pose type the daemon serves.
 #[derive(Clone, Debug)]
@@ -395,9 +395,7 @@ impl<P: EnginePose> EngineLoop<P> {
             version: snap.version,
             poses: 0,
             chi2: snap.chi2,
-            solved_at_ns: SystemTime::now()
-                .duration_since(UNIX_EPOCH)
-                .map_or(0, |d| d.as_nanos() as u64),
+            solved_at_ns: now_ns(),
             keyframes: self.counters.keyframes,
             edges: self.counters.edges,
             rejected: self.counters.rejected,
@@ -521,13 +519,6 @@ impl<P: EnginePose> EngineLoop<P> {
             tracing::error!(error = %e, "Cannot publish the switches.");
         }
     }
-}
-
-/// Nanoseconds since the UNIX epoch.
-pub(super) fn now_ns() -> u64 {
-    SystemTime::now()
-        .duration_since(UNIX_EPOCH)
-        .map_or(0, |d| d.as_nanos() as u64)
 }
 
 /// A number for this daemon start, nonzero and different from the last

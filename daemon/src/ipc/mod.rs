@@ -11,6 +11,7 @@
 //! [`slamd_protocol::transport`].
 
 mod acks;
+mod durability;
 mod durable;
 pub(crate) mod engine_loop;
 mod health;
