@@ -5,7 +5,7 @@
 
 use crate::replay::{replay, DaemonSink, Latency, ReplayPose};
 use crate::solve::file_name;
-use crate::solve3::top_view;
+use crate::solve::top_view;
 use anyhow::Context;
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};

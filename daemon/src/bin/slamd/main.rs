@@ -13,7 +13,6 @@ mod robust;
 mod run;
 mod signals;
 mod solve;
-mod solve3;
 mod status;
 mod synth;
 mod telemetry;
