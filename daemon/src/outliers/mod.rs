@@ -15,15 +15,17 @@
 //! enters with the switch its error has under the current estimate.
 //! Odometry is never switched.
 
+mod awake;
 pub mod consistency;
 pub mod cycles;
 pub mod drift;
 mod robust;
 mod starts;
 
+pub use awake::DORMANT_BELOW;
 pub use cycles::{CycleCheck, CycleParams, Verdict};
 pub use drift::DriftRun;
-pub use robust::{robust_polish, RobustEdges, RobustSolution, DORMANT_BELOW};
+pub use robust::{robust_polish, RobustEdges, RobustSolution};
 pub use starts::{ABANDON_RATIO, LATE_RATIO, LOOK_ITERATIONS, PROBE_ITERATIONS, PRUNE_RATIO};
 
 use crate::graph::Edge;

@@ -2,7 +2,7 @@
 //! end. Each start is probed for a few iterations; the ones near the lowest
 //! cost are finished, lowest first, and the lowest final cost wins.
 
-use super::robust::polish_awake;
+use super::awake::polish_awake;
 use crate::nonlinear::{LevenbergMarquardtParams, LiePose, LmReport, Problem};
 use crate::sparse::FactorError;
 use std::sync::{Mutex, OnceLock};
