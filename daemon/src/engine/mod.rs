@@ -131,8 +131,9 @@ impl<P: EnginePose> Engine<P> {
     /// An empty engine for poses `P`. The outlier filter's default
     /// thresholds move to `P`'s degrees of freedom
     /// ([`OutlierConfig::for_dof`](crate::outliers::OutlierConfig::for_dof));
-    /// a setting `P` has no use for ([`EnginePose::check`]) is turned off
-    /// with a warning. With the filter on, loop closures wait for its
+    /// a planar-only check in 3-D
+    /// ([`OutlierConfig::planar_only`](crate::outliers::OutlierConfig::planar_only))
+    /// is turned off with a warning. With the filter on, loop closures wait for its
     /// judge ([`judge`]).
     pub fn create(config: EngineConfig) -> Self {
         if !config.outliers.enabled {

@@ -1,15 +1,13 @@
 //! Rebuilding a [`State`]: the polish that moves the linearisation point
-//! ([`polish_model`]) and the fresh factor at it ([`factorise`]); both
-//! together are [`rebuild`]. A background re-solve runs the two halves on
+//! ([`polish_model`]) and the fresh factor at it
+//! ([`State::factorise`]); both together are [`rebuild`]. A background re-solve runs the two halves on
 //! its own thread, the foreground runs [`rebuild`] inline.
 
-use super::gauss_newton::GaussNewton;
 use super::model::Model;
 use super::op::Polish;
 use super::pose::EnginePose;
 use super::state::State;
 use super::EngineConfig;
-use crate::sparse::ordering::amd_newest_last;
 use crate::sparse::FactorError;
 use std::sync::atomic::AtomicBool;
 
@@ -23,7 +21,7 @@ pub fn rebuild<P: EnginePose>(
     config: &EngineConfig,
 ) -> Result<State<P>, FactorError> {
     let lin = polish_model(&mut model, start, polish, config, &AtomicBool::new(false));
-    factorise(model, lin, config)
+    State::factorise(model, lin, config)
 }
 
 /// The first half of [`rebuild`]: unjoins what no weighted edge
@@ -56,40 +54,6 @@ pub fn polish_model<P: EnginePose>(
         }
     }
     lin
-}
-
-/// The second half of [`rebuild`]: the fresh factor of `model`
-/// linearised at `lin`.
-pub fn factorise<P: EnginePose>(
-    mut model: Model<P>,
-    lin: Vec<P>,
-    config: &EngineConfig,
-) -> Result<State<P>, FactorError> {
-    let recent = config.recent_last;
-    let (joined, compact) = model.compact_joined();
-    let active: Vec<(usize, f64)> = (0..model.graph.edges().len())
-        .filter(|&e| model.edges[e].applied && model.weight(e) > 0.0)
-        .map(|e| (e, model.weight(e)))
-        .collect();
-    // every fix on a joined keyframe enters the fresh factor
-    let mut priors = Vec::new();
-    for f in 0..model.fixes.len() {
-        let on = model.joined(model.fixes[f].fix.keyframe);
-        let prior = if on { model.prior(f) } else { None };
-        model.fixes[f].applied = prior.is_some();
-        priors.extend(prior);
-    }
-    // elimination order over joined keyframes except the gauge
-    let pairs = active.iter().filter_map(|&(e, _)| {
-        let edge = &model.graph.edges()[e];
-        let (a, b) = (compact[edge.from], compact[edge.to]);
-        (a > 0 && b > 0).then(|| (a - 1, b - 1))
-    });
-    let perm = amd_newest_last(joined.len().saturating_sub(1), pairs, recent);
-    let order: Vec<usize> = perm.iter().map(|&c| joined[c + 1]).collect();
-    let gn = GaussNewton::build(&model.graph, &active, &priors, lin, &order)?;
-    let estimate = gn.estimate().to_vec();
-    Ok(State::assemble(config, model, gn, estimate))
 }
 
 #[cfg(test)]

@@ -164,7 +164,7 @@ pub fn run<P: EnginePose>(
         tracing::debug!(seconds = start.elapsed().as_secs_f64(), "Re-solve stopped.");
         return None;
     }
-    let state = rebuild::factorise(model, lin, config);
+    let state = State::factorise(model, lin, config);
     let mut last_seq = None;
     let (built, mut replayed) = (start.elapsed().as_secs_f64(), 0);
     let state = state.map(|mut s| {

@@ -16,7 +16,7 @@
 use super::judge;
 use super::model::{EdgeState, FixState, KeyframeState, Model};
 use super::op::Polish;
-use super::rebuild::{factorise, rebuild};
+use super::rebuild::rebuild;
 use super::state::State;
 use super::{Engine, EngineConfig, EngineError, EnginePose, FixInput};
 use crate::gps::{Geodetic, GpsFix, LocalFrame};
@@ -74,7 +74,7 @@ pub(super) fn state_of<P: EnginePose>(
         model.gps_weight = g.weight;
     }
     let state = if polish == Polish::None {
-        factorise(model, lin, config)
+        State::factorise(model, lin, config)
     } else {
         rebuild(model, &lin, polish, config)
     };

@@ -20,6 +20,7 @@ use crate::outliers::OFF_BELOW;
 use crate::sparse::FactorError;
 
 mod changes;
+mod factorise;
 
 /// The model, its Gauss–Newton system, the estimate and its cached χ².
 #[derive(Clone, Debug)]
@@ -129,7 +130,7 @@ impl<P: EnginePose> State<P> {
     pub fn reordered(&self, config: &EngineConfig) -> Result<Self, FactorError> {
         let mut lin = self.linearisation().to_vec();
         lin.extend_from_slice(&self.estimate[lin.len()..]);
-        let mut fresh = super::rebuild::factorise(self.model.clone(), lin, config)?;
+        let mut fresh = Self::factorise(self.model.clone(), lin, config)?;
         fresh.gate = self.gate.clone();
         fresh.hint = self.hint.clone();
         Ok(fresh)
