@@ -10,7 +10,8 @@
 //!
 //! It publishes at most `--rate` frames a second, always the newest
 //! snapshot, and again whenever a client subscribes so a late one sees the
-//! map at once.
+//! map at once; the recording takes at most `--record-rate` frames a
+//! second, and the last one.
 
 mod page;
 mod scene;
@@ -231,9 +232,11 @@ struct Sink {
 
 impl Sink {
     fn new(ctx: &Arc<Context>, rate: f64) -> anyhow::Result<Self> {
+        let period = Duration::try_from_secs_f64(1.0 / rate)
+            .map_err(|_| anyhow::anyhow!("{rate:e} frames a second is no rate a viewer can keep"))?;
         Ok(Self {
             channels: Channels::new(ctx)?,
-            period: Duration::from_secs_f64(1.0 / rate),
+            period,
             last: None,
             behind: false,
             frames: 0,
