@@ -170,6 +170,27 @@ impl Drop for Tmpfs {
     }
 }
 
+/// A daemon on namespace `tag` whose state directory sits on a 300 KiB
+/// tmpfs, which Manhattan's journal outgrows partway: the tmpfs, the state
+/// directory, the namespace and the daemon.
+fn daemon_on_a_small_disk(tag: &str) -> (Tmpfs, PathBuf, String, Daemon) {
+    let mount = fresh_dir(&format!("durable-{tag}"));
+    let tmpfs = Tmpfs::mount(&mount, "300k");
+    let state = mount.join("state");
+    let namespace = format!("slamd-test-{}-{tag}", std::process::id());
+    let daemon = Daemon::serve(&namespace, &["--state", state.to_str().unwrap()], &[]);
+    (tmpfs, state, namespace, daemon)
+}
+
+/// Grows `tmpfs` to 100 MiB 10 s from now, on a thread of its own.
+fn grow_in_ten_seconds(tmpfs: Tmpfs) -> std::thread::JoinHandle<Tmpfs> {
+    std::thread::spawn(move || {
+        std::thread::sleep(Duration::from_secs(10));
+        tmpfs.resize("100m");
+        tmpfs
+    })
+}
+
 /// The state directory on a 300 KiB tmpfs, which Manhattan's journal
 /// outgrows partway: the daemon holds its acknowledgements, the replay
 /// waits for it (saying why) instead of giving up after its 5 s, and when
@@ -177,11 +198,7 @@ impl Drop for Tmpfs {
 /// optimum with every keyframe.
 #[test]
 fn a_full_disk_holds_the_stream_until_space_returns() {
-    let mount = fresh_dir("durable-full-disk");
-    let tmpfs = Tmpfs::mount(&mount, "300k");
-    let state = mount.join("state");
-    let namespace = format!("slamd-test-{}-full-disk", std::process::id());
-    let daemon = Daemon::serve(&namespace, &["--state", state.to_str().unwrap()], &[]);
+    let (tmpfs, state, namespace, daemon) = daemon_on_a_small_disk("full-disk");
     let file = dataset("manhattanolson3500_g2oversion.g2o");
     let replay = Command::new(slamd_bin())
         .args(["replay", file.to_str().unwrap(), "--namespace", &namespace])
@@ -190,9 +207,9 @@ fn a_full_disk_holds_the_stream_until_space_returns() {
         .stderr(Stdio::piped())
         .spawn()
         .expect("start the replay");
-    std::thread::sleep(Duration::from_secs(10));
-    tmpfs.resize("100m");
+    let grow = grow_in_ten_seconds(tmpfs);
     let out = replay.wait_with_output().expect("the replay ends");
+    let _tmpfs = grow.join().unwrap();
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(out.status.success(), "replay failed: {stderr}");
     assert!(
@@ -218,17 +235,9 @@ fn a_full_disk_holds_the_stream_until_space_returns() {
 fn a_frontend_waits_for_a_daemon_that_holds_its_acknowledgements() {
     use slamd::ipc::{Endpoint, Frontend};
     use std::time::Instant;
-    let mount = fresh_dir("durable-frontend-holds");
-    let tmpfs = Tmpfs::mount(&mount, "300k");
-    let state = mount.join("state");
-    let namespace = format!("slamd-test-{}-frontend-holds", std::process::id());
-    let daemon = Daemon::serve(&namespace, &["--state", state.to_str().unwrap()], &[]);
+    let (tmpfs, _state, namespace, daemon) = daemon_on_a_small_disk("frontend-holds");
     let started = Instant::now();
-    let grow = std::thread::spawn(move || {
-        std::thread::sleep(Duration::from_secs(10));
-        tmpfs.resize("100m");
-        tmpfs
-    });
+    let grow = grow_in_ten_seconds(tmpfs);
     let g = read("manhattanolson3500_g2oversion.g2o");
     let mut f = Frontend::connect(Endpoint::new(&namespace)).unwrap();
     for (k, group) in g.by_newer().iter().enumerate() {
