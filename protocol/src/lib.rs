@@ -33,6 +33,7 @@ pub mod transport;
 pub use frontend::{Endpoint, Frontend, Waiting, SAY_EVERY};
 pub use message::{
     DaemonStatus, Edge, EdgeKindWire, FrontendAck, GpsFix, Keyframe, Pose, Rejection, RejectionReason,
-    SnapshotHeader, Switch, SwitchesHeader, INFORMATION_UPPER, MAX_FRONTENDS, POSE_PARAMS, PROTOCOL_VERSION,
+    SnapshotHeader, Switch, SwitchState, SwitchesHeader, INFORMATION_UPPER, MAX_FRONTENDS, POSE_PARAMS,
+    PROTOCOL_VERSION, REJECTED_BELOW,
 };
 pub use service::ServiceNames;

@@ -207,6 +207,48 @@ pub struct Switch {
     pub weight: f64,
 }
 
+/// A decided switch below this is a loop closure the filter holds wrong
+/// (what `rejected` counts).
+pub const REJECTED_BELOW: f64 = 0.5;
+
+/// What the outlier filter holds of a loop closure.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SwitchState {
+    /// In the estimate: decided, weight at least [`REJECTED_BELOW`].
+    Kept,
+    /// Decided wrong: weight below [`REJECTED_BELOW`].
+    Off,
+    /// Not decided yet, held out of the estimate.
+    Pending,
+}
+
+impl SwitchState {
+    /// Every state, in this order.
+    pub const ALL: [SwitchState; 3] = [SwitchState::Kept, SwitchState::Off, SwitchState::Pending];
+
+    /// Its name: `"kept"`, `"off"` or `"pending"`.
+    pub fn name(self) -> &'static str {
+        match self {
+            SwitchState::Kept => "kept",
+            SwitchState::Off => "off",
+            SwitchState::Pending => "pending",
+        }
+    }
+}
+
+impl Switch {
+    /// What the filter holds of this loop closure.
+    pub fn state(&self) -> SwitchState {
+        if self.pending != 0 {
+            SwitchState::Pending
+        } else if self.weight < REJECTED_BELOW {
+            SwitchState::Off
+        } else {
+            SwitchState::Kept
+        }
+    }
+}
+
 /// The header of a switch list; the payload is `count` [`Switch`]es, one
 /// per loop closure, in arrival order.
 #[repr(C)]
@@ -488,6 +530,19 @@ mod tests {
         assert_eq!(RejectionReason::from_u32(999), RejectionReason::Unknown);
         assert_eq!(EdgeKindWire::from_u32(3), Some(EdgeKindWire::TrustedLoopClosure));
         assert_eq!(EdgeKindWire::from_u32(4), None);
+    }
+
+    #[test]
+    fn a_switch_is_kept_at_one_half_off_below_and_pending_while_undecided() {
+        let s = |weight, pending| Switch {
+            weight,
+            pending,
+            ..Switch::default()
+        };
+        assert_eq!(s(0.5, 0).state(), SwitchState::Kept);
+        assert_eq!(s(0.499, 0).state(), SwitchState::Off);
+        assert_eq!(s(1.0, 1).state(), SwitchState::Pending);
+        assert_eq!(SwitchState::Off.name(), "off");
     }
 
     #[test]

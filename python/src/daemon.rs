@@ -232,17 +232,11 @@ fn daemon_switches(py: Python<'_>, s: &slamd_protocol::transport::SwitchesSample
     let all = s.switches();
     let edges =
         PyArray1::from_vec(py, all.iter().flat_map(|w| [w.from, w.to]).collect()).reshape([all.len(), 2])?;
-    let state =
-        |w: &slamd_protocol::Switch| match (w.pending != 0, w.weight < slamd::outliers::REJECTED_BELOW) {
-            (true, _) => "pending",
-            (false, true) => "off",
-            (false, false) => "kept",
-        };
     Ok(Switches {
         version: s.header().version,
         edges: edges.unbind(),
         weights: PyArray1::from_vec(py, all.iter().map(|w| w.weight).collect()).unbind(),
-        states: all.iter().map(state).collect(),
+        states: all.iter().map(|w| w.state().name()).collect(),
     })
 }
 

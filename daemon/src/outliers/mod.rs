@@ -184,8 +184,9 @@ impl OutlierConfig {
     }
 }
 
-/// A switch below this counts as a rejection (`rejected_edges`).
-pub const REJECTED_BELOW: f64 = 0.5;
+/// A switch below this counts as a rejection (`rejected_edges`): the
+/// wire's rule, one constant for the filter and its readers.
+pub use slamd_protocol::REJECTED_BELOW;
 
 /// A switch below this is off: the edge weighs `s² < 0.0025` of itself,
 /// too little to matter, and keeping it out of the factor saves the fill

@@ -107,15 +107,17 @@ impl Channels {
         })
     }
 
-    /// Logs `frame` on every channel someone listens to, at the time it
-    /// was solved.
-    fn publish(&self, frame: &Frame, status: Option<&DaemonStatus>) {
+    /// Logs `frame` on every map channel someone listens to, at the time
+    /// it was solved (the health goes by [`Self::publish_health`]).
+    fn publish(&self, frame: &Frame) {
         let t = frame.header.solved_at_ns;
         if self.trajectory.has_sinks() {
             self.trajectory.log_with_time(&frame.trajectory(), t);
         }
+        let loops = (self.graph.has_sinks() || self.map.has_sinks()).then(|| frame.loop_closures());
+        let loops = loops.as_deref().unwrap_or_default();
         if self.graph.has_sinks() {
-            self.graph.log_with_time(&frame.graph(), t);
+            self.graph.log_with_time(&frame.graph(loops), t);
         }
         if let Some(p) = frame.newest_pose().filter(|_| self.newest.has_sinks()) {
             self.newest.log_with_time(&p, t);
@@ -127,11 +129,11 @@ impl Channels {
             }
         }
         if self.map.has_sinks() {
-            self.map.log_with_meta(&frame.page_map(), at(t));
+            self.map.log_with_meta(&frame.page_map(loops), at(t));
         }
-        self.publish_health(frame, status);
     }
 
+    /// Logs the daemon's health: from its status, else from `frame`.
     fn publish_health(&self, frame: &Frame, status: Option<&DaemonStatus>) {
         if self.health.has_sinks() {
             let t = status.map_or(frame.header.solved_at_ns, |s| s.snapshot.solved_at_ns);
@@ -244,15 +246,17 @@ impl Sink {
     }
 
     /// Publishes `frame` if one came since the last and the period has
-    /// passed (or, with `now`, at once).
-    fn publish(&mut self, frame: &Frame, status: Option<&DaemonStatus>, now: bool) {
+    /// passed (or, with `now`, at once); whether it did.
+    fn publish(&mut self, frame: &Frame, now: bool) -> bool {
         let due = now || self.last.is_none_or(|t| t.elapsed() >= self.period);
-        if self.behind && due && frame.header.version > 0 {
-            self.channels.publish(frame, status);
-            self.frames += 1;
-            self.last = Some(Instant::now());
-            self.behind = false;
+        if !(self.behind && due && frame.header.version > 0) {
+            return false;
         }
+        self.channels.publish(frame);
+        self.frames += 1;
+        self.last = Some(Instant::now());
+        self.behind = false;
+        true
     }
 
     /// How long until this sink may publish again.
@@ -303,11 +307,15 @@ fn serve(
                 heard = Instant::now();
                 live.channels.publish_health(&frame, status.as_ref());
             }
+            // the live view's health goes with every status read, the
+            // recording's with its frames
             live.behind |= changed;
-            live.publish(&frame, status.as_ref(), stopping);
+            live.publish(&frame, stopping);
             if let Some(r) = record.as_deref_mut() {
                 r.behind |= changed;
-                r.publish(&frame, status.as_ref(), stopping);
+                if r.publish(&frame, stopping) {
+                    r.channels.publish_health(&frame, status.as_ref());
+                }
             }
             if stopping {
                 return Ok(());

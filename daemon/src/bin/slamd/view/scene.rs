@@ -13,8 +13,7 @@ use foxglove::messages::{
 };
 use nalgebra::{Matrix2, Matrix3, Rotation3, SymmetricEigen, UnitQuaternion};
 use slamd::gps::{Geodetic, LocalFrame};
-use slamd::outliers::REJECTED_BELOW;
-use slamd_protocol::{DaemonStatus, Pose, SnapshotHeader, Switch};
+use slamd_protocol::{DaemonStatus, Pose, SnapshotHeader, Switch, SwitchState};
 use std::collections::HashMap;
 
 /// The frame every pose is given in.
@@ -35,48 +34,13 @@ pub struct Frame {
     pub loops: Vec<Switch>,
 }
 
-/// What the outlier filter holds of a loop closure.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum LoopState {
-    /// In the estimate (weight at least 0.5).
-    Kept,
-    /// Decided wrong: weight below 0.5.
-    Off,
-    /// Not decided yet, held out of the estimate.
-    Pending,
-}
-
-impl LoopState {
-    /// The state a switch reports.
-    pub fn of(s: &Switch) -> Self {
-        if s.pending != 0 {
-            LoopState::Pending
-        } else if s.weight < REJECTED_BELOW {
-            LoopState::Off
-        } else {
-            LoopState::Kept
-        }
+/// A loop closure's colour in both views, by what the filter holds of it.
+fn color(state: SwitchState) -> Color {
+    match state {
+        SwitchState::Kept => rgb(0.16, 0.63, 0.30),
+        SwitchState::Off => rgb(0.86, 0.15, 0.15),
+        SwitchState::Pending => rgb(0.96, 0.62, 0.07),
     }
-
-    /// Its name, as the page and the graph's metadata spell it.
-    pub fn name(self) -> &'static str {
-        match self {
-            LoopState::Kept => "kept",
-            LoopState::Off => "off",
-            LoopState::Pending => "pending",
-        }
-    }
-
-    /// Its colour in both views.
-    fn color(self) -> Color {
-        match self {
-            LoopState::Kept => rgb(0.16, 0.63, 0.30),
-            LoopState::Off => rgb(0.86, 0.15, 0.15),
-            LoopState::Pending => rgb(0.96, 0.62, 0.07),
-        }
-    }
-
-    const ALL: [LoopState; 3] = [LoopState::Kept, LoopState::Off, LoopState::Pending];
 }
 
 fn rgb(r: f64, g: f64, b: f64) -> Color {
@@ -130,11 +94,12 @@ impl Frame {
     }
 
     /// The loop closures whose both keyframes are in the snapshot, with
-    /// their state: `(from index, to index, state)`.
-    pub fn loop_closures(&self) -> Vec<(usize, usize, LoopState)> {
+    /// their state: `(from index, to index, state)`; what
+    /// [`Self::graph`] and [`Self::page_map`] draw.
+    pub fn loop_closures(&self) -> Vec<(usize, usize, SwitchState)> {
         let index = self.index();
         (self.loops.iter())
-            .filter_map(|s| Some((*index.get(&s.from)?, *index.get(&s.to)?, LoopState::of(s))))
+            .filter_map(|s| Some((*index.get(&s.from)?, *index.get(&s.to)?, s.state())))
             .collect()
     }
 
@@ -171,20 +136,20 @@ impl Frame {
     /// The graph: entity `graph` with one line primitive for the odometry
     /// chain and one per loop-closure state (its metadata counts each),
     /// and entity `newest` with the newest keyframe's position ellipsoid
-    /// at [`SIGMAS`] when the header carries its covariance.
-    pub fn graph(&self) -> SceneUpdate {
+    /// at [`SIGMAS`] when the header carries its covariance. `loops` is
+    /// [`Self::loop_closures`].
+    pub fn graph(&self, loops: &[(usize, usize, SwitchState)]) -> SceneUpdate {
         let odometry = line(
             LineType::LineStrip,
             rgb(0.55, 0.55, 0.55),
             self.poses.iter().map(point),
         );
-        let loops = self.loop_closures();
         let mut lines = vec![odometry];
         let mut metadata = Vec::new();
-        for state in LoopState::ALL {
+        for state in SwitchState::ALL {
             let ends = (loops.iter().filter(|l| l.2 == state))
                 .flat_map(|&(i, j, _)| [point(&self.poses[i]), point(&self.poses[j])]);
-            let l = line(LineType::LineList, state.color(), ends);
+            let l = line(LineType::LineList, color(state), ends);
             metadata.push(foxglove::messages::KeyValuePair {
                 key: state.name().into(),
                 value: (l.points.len() / 2).to_string(),
@@ -252,7 +217,8 @@ impl Frame {
 
     /// The page's map: `{"version", "dimension", "poses": [[id, x, y], …],
     /// "loops": [[from id, to id, state], …]}` (the page draws from above).
-    pub fn page_map(&self) -> Vec<u8> {
+    /// `loops` is [`Self::loop_closures`].
+    pub fn page_map(&self, loops: &[(usize, usize, SwitchState)]) -> Vec<u8> {
         #[derive(serde::Serialize)]
         struct PageMap {
             version: u64,
@@ -264,8 +230,8 @@ impl Frame {
             version: self.header.version,
             dimension: self.header.dimension,
             poses: self.poses.iter().map(|p| (p.id, p.x, p.y)).collect(),
-            loops: (self.loop_closures().into_iter())
-                .map(|(i, j, s)| (self.poses[i].id, self.poses[j].id, s.name()))
+            loops: (loops.iter())
+                .map(|&(i, j, s)| (self.poses[i].id, self.poses[j].id, s.name()))
                 .collect(),
         };
         serde_json::to_vec(&map).unwrap_or_default()

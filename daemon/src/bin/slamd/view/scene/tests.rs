@@ -47,13 +47,6 @@ fn square() -> Frame {
 }
 
 #[test]
-fn a_switch_is_kept_at_one_half_off_below_and_pending_while_undecided() {
-    assert_eq!(LoopState::of(&switch(0, 1, 0.5, false)), LoopState::Kept);
-    assert_eq!(LoopState::of(&switch(0, 1, 0.499, false)), LoopState::Off);
-    assert_eq!(LoopState::of(&switch(0, 1, 1.0, true)), LoopState::Pending);
-}
-
-#[test]
 fn timestamps_split_into_seconds_and_nanoseconds() {
     assert_eq!(timestamp(3_500_000_001), Timestamp::new(3, 500_000_001));
 }
@@ -61,7 +54,7 @@ fn timestamps_split_into_seconds_and_nanoseconds() {
 #[test]
 fn the_graph_draws_the_odometry_chain_and_each_loop_closure_by_state() {
     let f = square();
-    let update = f.graph();
+    let update = f.graph(&f.loop_closures());
     assert_eq!(update.entities.len(), 1, "no covariance: no ellipsoid");
     let g = &update.entities[0];
     assert_eq!(g.id, "graph");
@@ -96,7 +89,8 @@ fn the_trajectory_carries_every_pose_as_the_snapshot_has_it() {
 
 #[test]
 fn the_page_map_lists_ids_positions_and_loop_states() {
-    let m: serde_json::Value = serde_json::from_slice(&square().page_map()).unwrap();
+    let f = square();
+    let m: serde_json::Value = serde_json::from_slice(&f.page_map(&f.loop_closures())).unwrap();
     assert_eq!(m["version"], 7);
     assert_eq!(m["poses"][3], serde_json::json!([13, 0.0, 1.0]));
     assert_eq!(
