@@ -414,7 +414,7 @@ fn daemon_snapshots_equal_the_embedded_engine() {
         },
         ..Config::default()
     };
-    let mut embedded = Embedded::new(&config);
+    let mut embedded: Embedded = Embedded::new(&config);
     let stamp = |k: usize| 1_700_000_000_000_000_000 + 100_000_000 * k as u64;
     let mut last = None;
     for (k, group) in groups.iter().enumerate() {

@@ -131,9 +131,9 @@ fn a_3d_daemon_georeferences_with_heights() {
     let mut f = Frontend::connect(&daemon.config()).unwrap();
     let mut seq = 0;
     for k in 0..truth.len() {
-        seq = f.add_keyframe3(k as u64, 0, None).unwrap();
+        seq = f.add_keyframe(k as u64, 0, None).unwrap();
         if k > 0 {
-            seq = f.add_edge3(&odometry(&truth, k)).unwrap();
+            seq = f.add_edge(&odometry(&truth, k)).unwrap();
         }
         if k % 5 == 0 {
             seq = f.add_gps(&fix(&truth, k, true)).unwrap();

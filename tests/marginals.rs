@@ -17,7 +17,7 @@ use nalgebra::{DMatrix, UnitQuaternion, Vector3};
 use proptest::prelude::*;
 use slamd::engine::{Engine, EngineConfig, EngineError, EnginePose};
 use slamd::geometry::Pose2;
-use slamd::graph::{edge_error, edge_error3, Edge, EdgeKind, Information, Information6, Pose3, PoseGraph};
+use slamd::graph::{edge_error, Edge, EdgeKind, Information, Information6, Pose3, PoseGraph};
 use slamd::store::MapFile;
 use std::f64::consts::PI;
 
@@ -61,7 +61,7 @@ impl Numeric for Pose3 {
         self.compose(&Pose3::new(t, r))
     }
     fn error(edge: &Edge<Pose3>, xi: &Pose3, xj: &Pose3) -> Vec<f64> {
-        edge_error3(edge, xi, xj).to_vec()
+        edge_error(edge, xi, xj).to_vec()
     }
     fn omega(edge: &Edge<Pose3>) -> DMatrix<f64> {
         DMatrix::from_iterator(6, 6, edge.information.matrix().iter().copied())

@@ -6,7 +6,7 @@ use crate::daemon::Daemon;
 use slamd::graph::{EdgeKind, Pose3};
 use slamd::solver::{solve_batch, BatchOptions};
 use slamd::synthetic::{generate_building, WorldParams};
-use slamd_client::{Frontend, RejectionReason, SnapshotHeader, Snapshots};
+use slamd_client::{Frontend, Pose2, RejectionReason, SnapshotHeader, Snapshots};
 use slamd_tests::slamd_bin;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
@@ -32,7 +32,7 @@ fn wait_until(
         }
         let mut poses = vec![None; snap.poses().len()];
         for p in snap.poses() {
-            poses[p.id as usize] = Some(p.pose3().expect("a unit quaternion"));
+            poses[p.id as usize] = Some(p.pose::<Pose3>().expect("a unit quaternion"));
         }
         if done(&poses, &h) {
             return (poses, h);
@@ -80,9 +80,9 @@ fn a_building_streams_through_a_3d_daemon_and_survives_a_restart() {
     // loop closures off)
     let mut seq = 0;
     for (k, group) in g.by_newer().into_iter().enumerate() {
-        seq = f.add_keyframe3(g.id_of(k), 0, None).unwrap();
+        seq = f.add_keyframe(g.id_of(k), 0, None).unwrap();
         for e in group {
-            seq = f.add_edge3(&g.edge_input(e)).unwrap();
+            seq = f.add_edge(&g.edge_input(e)).unwrap();
         }
         f.flush().unwrap();
         wait_until(&snaps, f.id(), seq, |_, _| true);
@@ -114,9 +114,11 @@ fn a_building_streams_through_a_3d_daemon_and_survives_a_restart() {
     );
     assert_eq!(header.pending, 0);
 
-    // a 2-D keyframe is refused with the reason, the map untouched
-    let wrong = f.add_keyframe(9999, 0, None).unwrap();
-    f.flush().unwrap();
+    // a 2-D keyframe, from a planar frontend, is refused with the reason,
+    // the map untouched
+    let mut planar: Frontend<Pose2> = Frontend::connect(&daemon.config()).unwrap();
+    let wrong = planar.add_keyframe(9999, 0, None).unwrap();
+    planar.flush().unwrap();
     let deadline = Instant::now() + Duration::from_secs(20);
     let rejection = loop {
         let found = snaps
@@ -135,18 +137,18 @@ fn a_building_streams_through_a_3d_daemon_and_survives_a_restart() {
         rejection.text(),
         "keyframe 9999 is 2-D; this daemon serves 3-D graphs (its `dimension` setting)"
     );
-    let (_, after) = wait_until(&snaps, f.id(), wrong, |_, _| true);
+    let (_, after) = wait_until(&snaps, planar.id(), wrong, |_, _| true);
     assert_eq!((after.keyframes, after.rejected), (n as u64, 1));
     let chi2 = after.chi2;
     let id = f.id();
-    drop(f);
+    drop((f, planar));
     assert!(daemon.stop().success());
 
     // a new start on the same directory publishes the same map
     let daemon = Daemon::serve(&namespace, &args, &env);
     let snaps = Snapshots::open(&namespace).unwrap();
     // (it acknowledges what the last start had taken)
-    let (restored, h) = wait_until(&snaps, id, wrong, |_, h| h.keyframes == n as u64);
+    let (restored, h) = wait_until(&snaps, id, seq, |_, h| h.keyframes == n as u64);
     assert_eq!(
         (h.dimension, h.poses, h.edges),
         (3, n as u64, g.edges().len() as u64)

@@ -2,10 +2,12 @@
 
 use crate::publish::{ClientError, Publish};
 use slamd::config::Config;
-use slamd::engine::{Engine, Snapshot, UpdateReport};
+use slamd::engine::{Engine, EnginePose, Snapshot, UpdateReport};
 use slamd_types::{EdgeInput, FixInput, KeyframeId, Pose2};
 
-/// The engine behind the [`Publish`] API, in this process.
+/// The engine behind the [`Publish`] API, in this process, for graphs of
+/// `P`'s dimension ([`Pose2`], the default, or
+/// [`Pose3`](slamd_types::Pose3)).
 ///
 /// ```
 /// use slamd_client::{Config, EdgeInput, EdgeKind, Embedded, Information, Pose2, Publish};
@@ -28,20 +30,20 @@ use slamd_types::{EdgeInput, FixInput, KeyframeId, Pose2};
 /// let bad = EdgeInput::new(3, 99, step, Information::identity(), EdgeKind::LoopClosure);
 /// assert!(slam.add_edge(&bad).is_err());
 /// ```
-pub struct Embedded {
-    engine: Engine,
+pub struct Embedded<P: EnginePose = Pose2> {
+    engine: Engine<P>,
 }
 
-impl Embedded {
+impl<P: EnginePose> Embedded<P> {
     /// An engine with `config.engine`.
     pub fn new(config: &Config) -> Self {
         Self {
-            engine: Engine::new(config.engine()),
+            engine: Engine::create(config.engine()),
         }
     }
 
     /// The current estimate.
-    pub fn snapshot(&self) -> Snapshot<'_> {
+    pub fn snapshot(&self) -> Snapshot<'_, P> {
         self.engine.snapshot()
     }
 
@@ -51,23 +53,23 @@ impl Embedded {
     }
 
     /// The engine itself, for reweights, re-solves and statistics.
-    pub fn engine(&mut self) -> &mut Engine {
+    pub fn engine(&mut self) -> &mut Engine<P> {
         &mut self.engine
     }
 }
 
-impl Publish for Embedded {
+impl<P: EnginePose> Publish<P> for Embedded<P> {
     fn add_keyframe(
         &mut self,
         id: KeyframeId,
         timestamp_ns: u64,
-        guess: Option<Pose2>,
+        guess: Option<P>,
     ) -> Result<(), ClientError> {
         self.engine.add_keyframe_at(id, guess, timestamp_ns)?;
         Ok(())
     }
 
-    fn add_edge(&mut self, edge: &EdgeInput) -> Result<(), ClientError> {
+    fn add_edge(&mut self, edge: &EdgeInput<P>) -> Result<(), ClientError> {
         self.engine.add_edge(*edge)?;
         Ok(())
     }

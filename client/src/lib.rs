@@ -11,10 +11,11 @@
 //!   [`latest`](Snapshots::latest)) and its rejections.
 //! - `Embedded` is the same [`Publish`] API on an engine in this process,
 //!   for applications that embed slamd instead of talking to a daemon.
-//! - A daemon serving 3-D graphs (`dimension = 3`) takes spatial keyframes
-//!   and edges from [`Frontend::add_keyframe3`] and
-//!   [`Frontend::add_edge3`]; its snapshots' poses read back with
-//!   [`Pose::pose3`]. [`Publish`] and `Embedded` are planar.
+//! - Both dimensions share one API, typed by the pose: `Frontend<Pose2>`
+//!   (the default) publishes to a daemon serving 2-D graphs,
+//!   `Frontend<Pose3>` to one serving 3-D graphs (`dimension = 3`), and
+//!   [`Pose::pose`] reads a snapshot's pose back as either; [`Publish`]
+//!   and `Embedded` take the same parameter.
 //!
 //! The example runs a daemon on a thread, so it needs `embedded`:
 #![cfg_attr(feature = "embedded", doc = "```")]

@@ -4,7 +4,7 @@
 use slamd::engine::EngineError;
 use slamd_protocol::transport::TransportError;
 use slamd_protocol::Frontend;
-use slamd_types::{EdgeInput, FixInput, KeyframeId, Pose2};
+use slamd_types::{EdgeInput, FixInput, KeyframeId, Pose2, RigidMotion};
 use std::fmt;
 
 /// A failed call: the transport (daemon) or the engine (embedded) refused.
@@ -50,34 +50,34 @@ impl From<EngineError> for ClientError {
 ///
 /// A daemon checks what it receives asynchronously and reports refusals on
 /// its rejection topic; an embedded engine refuses at once, in the `Err`.
-pub trait Publish {
+pub trait Publish<P: RigidMotion = Pose2> {
     /// A new keyframe, with an initial guess in the map frame if known.
     fn add_keyframe(
         &mut self,
         id: KeyframeId,
         timestamp_ns: u64,
-        guess: Option<Pose2>,
+        guess: Option<P>,
     ) -> Result<(), ClientError>;
     /// A new edge between keyframes (which may arrive later, for a daemon).
-    fn add_edge(&mut self, edge: &EdgeInput) -> Result<(), ClientError>;
+    fn add_edge(&mut self, edge: &EdgeInput<P>) -> Result<(), ClientError>;
     /// A GPS fix taken at a keyframe (which may arrive later, for a daemon).
     fn add_gps(&mut self, fix: &FixInput) -> Result<(), ClientError>;
     /// Marks the end of a batch: the solver takes it in and publishes.
     fn flush(&mut self) -> Result<(), ClientError>;
 }
 
-impl Publish for Frontend {
+impl<P: RigidMotion> Publish<P> for Frontend<P> {
     fn add_keyframe(
         &mut self,
         id: KeyframeId,
         timestamp_ns: u64,
-        guess: Option<Pose2>,
+        guess: Option<P>,
     ) -> Result<(), ClientError> {
         Frontend::add_keyframe(self, id, timestamp_ns, guess)?;
         Ok(())
     }
 
-    fn add_edge(&mut self, edge: &EdgeInput) -> Result<(), ClientError> {
+    fn add_edge(&mut self, edge: &EdgeInput<P>) -> Result<(), ClientError> {
         Frontend::add_edge(self, edge)?;
         Ok(())
     }

@@ -3,7 +3,7 @@
 //! ATE is the position RMSE after the rigid motion `(R, t)` that best
 //! aligns the estimate to the truth. In the plane, with centred points
 //! `e'_k`, `g'_k`: `R = arg Σ g'_k ē'_k` and `t = ḡ − R ē` (Kabsch in
-//! complex numbers); in space, Kabsch by the SVD ([`align_rigid3`]).
+//! complex numbers); in space, Kabsch by the SVD ([`align_spatial`]).
 
 use crate::geometry::Pose2;
 use crate::graph::{KeyframeId, Pose3, PoseGraph, RigidMotion};
@@ -21,7 +21,7 @@ pub struct Ate {
 }
 
 /// The rigid motion `x ↦ R x + t` best aligning `from` onto `to`.
-pub fn align_rigid(from: &[c64], to: &[c64]) -> (c64, c64) {
+pub fn align_planar(from: &[c64], to: &[c64]) -> (c64, c64) {
     let n = from.len().max(1) as f64;
     let cf: c64 = from.iter().sum::<c64>() / n;
     let ct: c64 = to.iter().sum::<c64>() / n;
@@ -39,7 +39,7 @@ pub fn align_rigid(from: &[c64], to: &[c64]) -> (c64, c64) {
 pub fn aligned_onto(moving: &[Pose2], fixed: &[Pose2]) -> Vec<Pose2> {
     let m: Vec<c64> = moving.iter().map(|p| p.position()).collect();
     let f: Vec<c64> = fixed.iter().take(m.len()).map(|p| p.position()).collect();
-    let (r, t) = align_rigid(&m[..f.len()], &f);
+    let (r, t) = align_planar(&m[..f.len()], &f);
     moving
         .iter()
         .map(|p| Pose2::from_complex(r * p.position() + t, p.theta + r.arg()))
@@ -49,7 +49,7 @@ pub fn aligned_onto(moving: &[Pose2], fixed: &[Pose2]) -> Vec<Pose2> {
 /// The rigid motion `x ↦ R x + t` best aligning `from` onto `to` in 3-D
 /// (Kabsch: the SVD of the cross-covariance, with a reflection turned
 /// into a rotation).
-pub fn align_rigid3(from: &[Vector3<f64>], to: &[Vector3<f64>]) -> (Rotation3<f64>, Vector3<f64>) {
+pub fn align_spatial(from: &[Vector3<f64>], to: &[Vector3<f64>]) -> (Rotation3<f64>, Vector3<f64>) {
     let n = from.len().max(1) as f64;
     let cf = from.iter().sum::<Vector3<f64>>() / n;
     let ct = to.iter().sum::<Vector3<f64>>() / n;
@@ -79,7 +79,7 @@ impl Aligned for Pose2 {
     fn aligned_rmse(est: &[Pose2], truth: &[Pose2]) -> f64 {
         let est: Vec<c64> = est.iter().map(|p| p.position()).collect();
         let gt: Vec<c64> = truth.iter().map(|p| p.position()).collect();
-        let (r, t) = align_rigid(&est, &gt);
+        let (r, t) = align_planar(&est, &gt);
         let sq: f64 = est.iter().zip(&gt).map(|(e, g)| (r * e + t - g).norm_sqr()).sum();
         (sq / est.len() as f64).sqrt()
     }
@@ -91,7 +91,7 @@ impl Aligned for Pose3 {
     fn aligned_rmse(est: &[Pose3], truth: &[Pose3]) -> f64 {
         let est: Vec<Vector3<f64>> = est.iter().map(|p| p.translation).collect();
         let gt: Vec<Vector3<f64>> = truth.iter().map(|p| p.translation).collect();
-        let (r, t) = align_rigid3(&est, &gt);
+        let (r, t) = align_spatial(&est, &gt);
         let sq: f64 = est
             .iter()
             .zip(&gt)

@@ -19,8 +19,9 @@
 use crate::codec::{edge_out, gps_out, keyframe_out, Origin};
 use crate::message::{Edge, GpsFix, Keyframe};
 use crate::transport::{FrontendLink, TransportError};
-use slamd_types::{EdgeInput, FixInput, KeyframeId, Pose2, Pose3, RigidMotion};
+use slamd_types::{EdgeInput, FixInput, KeyframeId, Pose2, RigidMotion};
 use std::collections::VecDeque;
+use std::marker::PhantomData;
 use std::sync::atomic::{AtomicU32, Ordering};
 use std::time::{Duration, Instant};
 
@@ -111,9 +112,11 @@ enum Outgoing {
     Gps(GpsFix),
 }
 
-/// A frontend's connection: each message gets the next number; the daemon
-/// acknowledges numbers and names them in rejections.
-pub struct Frontend {
+/// A frontend's connection to a daemon of `P`'s dimension ([`Pose2`] in
+/// the plane, the default; [`Pose3`](slamd_types::Pose3) in space): each
+/// message gets the next number; the daemon acknowledges numbers and names
+/// them in rejections.
+pub struct Frontend<P: RigidMotion = Pose2> {
     link: FrontendLink,
     endpoint: Endpoint,
     id: u32,
@@ -131,9 +134,10 @@ pub struct Frontend {
     heard: Instant,
     /// Whether that status said it holds acknowledgements.
     holding: bool,
+    dimension: PhantomData<P>,
 }
 
-impl Frontend {
+impl<P: RigidMotion> Frontend<P> {
     /// Connects to the daemon at `endpoint` (for example a daemon's
     /// configuration: its namespace, backpressure and reconnect bound).
     pub fn connect(endpoint: impl Into<Endpoint>) -> Result<Self, TransportError> {
@@ -155,6 +159,7 @@ impl Frontend {
             resent: 0,
             heard: Instant::now(),
             holding,
+            dimension: PhantomData,
         })
     }
 
@@ -204,43 +209,9 @@ impl Frontend {
         self.holding
     }
 
-    /// Publishes a planar keyframe (to a 2-D daemon); returns its message
-    /// number.
+    /// Publishes a keyframe, with its time (ns, the frontend's clock; 0:
+    /// none) and an optional initial pose; returns its message number.
     pub fn add_keyframe(
-        &mut self,
-        id: KeyframeId,
-        timestamp_ns: u64,
-        guess: Option<Pose2>,
-    ) -> Result<u64, TransportError> {
-        self.publish_keyframe(id, timestamp_ns, guess)
-    }
-
-    /// Publishes a planar edge (to a 2-D daemon); returns its message
-    /// number.
-    pub fn add_edge(&mut self, edge: &EdgeInput) -> Result<u64, TransportError> {
-        self.publish_edge(edge)
-    }
-
-    /// Publishes a spatial keyframe (to a 3-D daemon); returns its message
-    /// number.
-    pub fn add_keyframe3(
-        &mut self,
-        id: KeyframeId,
-        timestamp_ns: u64,
-        guess: Option<Pose3>,
-    ) -> Result<u64, TransportError> {
-        self.publish_keyframe(id, timestamp_ns, guess)
-    }
-
-    /// Publishes a spatial edge (to a 3-D daemon); returns its message
-    /// number.
-    pub fn add_edge3(&mut self, edge: &EdgeInput<Pose3>) -> Result<u64, TransportError> {
-        self.publish_edge(edge)
-    }
-
-    /// Publishes a keyframe of either dimension; returns its message
-    /// number.
-    pub fn publish_keyframe<P: RigidMotion>(
         &mut self,
         id: KeyframeId,
         timestamp_ns: u64,
@@ -250,8 +221,8 @@ impl Frontend {
         self.send(Outgoing::Keyframe(keyframe_out(id, timestamp_ns, guess, o)))
     }
 
-    /// Publishes an edge of either dimension; returns its message number.
-    pub fn publish_edge<P: RigidMotion>(&mut self, edge: &EdgeInput<P>) -> Result<u64, TransportError> {
+    /// Publishes an edge; returns its message number.
+    pub fn add_edge(&mut self, edge: &EdgeInput<P>) -> Result<u64, TransportError> {
         let o = self.next();
         self.send(Outgoing::Edge(edge_out(edge, o)))
     }

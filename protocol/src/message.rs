@@ -174,15 +174,15 @@ pub struct Pose {
 }
 
 impl Pose {
-    /// The planar pose `(x, y, θ)` (what a 2-D daemon solved).
-    pub fn pose2(&self) -> slamd_types::Pose2 {
-        slamd_types::Pose2::new(self.x, self.y, self.theta)
-    }
-
-    /// The spatial pose (what a 3-D daemon solved); `None` if a number is
+    /// The pose in the dimension the daemon serves: `(x, y, θ)` in the
+    /// plane, `(x, y, z, qx, qy, qz, qw)` in space; `None` if a number is
     /// not finite or the quaternion is not of unit norm.
-    pub fn pose3(&self) -> Option<slamd_types::Pose3> {
-        slamd_types::Pose3::from_xyz_quaternion([self.x, self.y, self.z, self.qx, self.qy, self.qz, self.qw])
+    pub fn pose<P: slamd_types::RigidMotion>(&self) -> Option<P> {
+        if P::DIMENSION == 2 {
+            P::from_params(&[self.x, self.y, self.theta])
+        } else {
+            P::from_params(&[self.x, self.y, self.z, self.qx, self.qy, self.qz, self.qw])
+        }
     }
 }
 

@@ -8,7 +8,7 @@ use pyo3::prelude::*;
 use slamd::geometry::Pose2;
 use slamd::graph::Pose3;
 use slamd_protocol::transport::SnapshotLink;
-use slamd_protocol::{Endpoint, Frontend as Link};
+use slamd_protocol::Endpoint;
 use std::time::{Duration, Instant};
 
 /// A frontend publishing to the daemon of `namespace` (the daemon's
@@ -19,7 +19,22 @@ use std::time::{Duration, Instant};
 #[pyclass(module = "slamd", unsendable)]
 pub struct Frontend {
     link: Link,
-    dimension: u32,
+}
+
+/// The connection, typed by the daemon's dimension.
+enum Link {
+    Planar(slamd_protocol::Frontend<Pose2>),
+    Spatial(slamd_protocol::Frontend<Pose3>),
+}
+
+/// `$body` with `$l` bound to the connection, whatever its dimension.
+macro_rules! on_link {
+    ($link:expr, $l:ident => $body:expr) => {
+        match $link {
+            Link::Planar($l) => $body,
+            Link::Spatial($l) => $body,
+        }
+    };
 }
 
 #[pymethods]
@@ -30,20 +45,25 @@ impl Frontend {
         if !(2..=3).contains(&dimension) {
             return Err(error(format!("dimension {dimension}: 2 or 3")));
         }
-        let link = Link::connect(Endpoint::new(namespace)).map_err(error)?;
-        Ok(Self { link, dimension })
+        let endpoint = Endpoint::new(namespace);
+        let link = if dimension == 2 {
+            Link::Planar(slamd_protocol::Frontend::connect(endpoint).map_err(error)?)
+        } else {
+            Link::Spatial(slamd_protocol::Frontend::connect(endpoint).map_err(error)?)
+        };
+        Ok(Self { link })
     }
 
     /// This frontend's id in the daemon's acknowledgements.
     #[getter]
     fn id(&self) -> u32 {
-        self.link.id()
+        on_link!(&self.link, l => l.id())
     }
 
     /// The number of the last message sent.
     #[getter]
     fn last_sequence(&self) -> u64 {
-        self.link.last_sequence()
+        on_link!(&self.link, l => l.last_sequence())
     }
 
     /// Publishes a keyframe, with an optional initial pose and its time
@@ -55,12 +75,15 @@ impl Frontend {
         guess: Option<&Bound<'_, PyAny>>,
         timestamp_ns: u64,
     ) -> PyResult<u64> {
-        if self.dimension == 2 {
-            let guess = guess.map(convert::pose::<Pose2>).transpose()?;
-            self.link.publish_keyframe(id, timestamp_ns, guess)
-        } else {
-            let guess = guess.map(convert::pose::<Pose3>).transpose()?;
-            self.link.publish_keyframe(id, timestamp_ns, guess)
+        match &mut self.link {
+            Link::Planar(l) => {
+                let guess = guess.map(convert::pose::<Pose2>).transpose()?;
+                l.add_keyframe(id, timestamp_ns, guess)
+            }
+            Link::Spatial(l) => {
+                let guess = guess.map(convert::pose::<Pose3>).transpose()?;
+                l.add_keyframe(id, timestamp_ns, guess)
+            }
         }
         .map_err(error)
     }
@@ -76,12 +99,9 @@ impl Frontend {
         information: &Bound<'_, PyAny>,
         kind: Option<&str>,
     ) -> PyResult<u64> {
-        if self.dimension == 2 {
-            let edge = convert::edge::<Pose2>(from_id, to_id, measurement, information, kind)?;
-            self.link.publish_edge(&edge)
-        } else {
-            let edge = convert::edge::<Pose3>(from_id, to_id, measurement, information, kind)?;
-            self.link.publish_edge(&edge)
+        match &mut self.link {
+            Link::Planar(l) => l.add_edge(&convert::edge(from_id, to_id, measurement, information, kind)?),
+            Link::Spatial(l) => l.add_edge(&convert::edge(from_id, to_id, measurement, information, kind)?),
         }
         .map_err(error)
     }
@@ -98,12 +118,12 @@ impl Frontend {
         height_variance: Option<f64>,
     ) -> PyResult<u64> {
         let fix = convert::fix(keyframe, lat, lon, height, covariance, height_variance)?;
-        self.link.add_gps(&fix).map_err(error)
+        on_link!(&mut self.link, l => l.add_gps(&fix)).map_err(error)
     }
 
     /// Wakes the daemon for what was published.
     fn flush(&mut self) -> PyResult<()> {
-        self.link.flush().map_err(error)
+        on_link!(&mut self.link, l => l.flush()).map_err(error)
     }
 
     /// Waits until the daemon has acknowledged message `sequence` (default:
@@ -114,36 +134,34 @@ impl Frontend {
     /// logger (warning) at most every 5 s. Ctrl-C interrupts it.
     #[pyo3(signature = (sequence = None, timeout = 10.0))]
     fn wait_acknowledged(&mut self, py: Python<'_>, sequence: Option<u64>, timeout: f64) -> PyResult<bool> {
-        let sequence = sequence.unwrap_or(self.link.last_sequence());
+        let sequence = sequence.unwrap_or(on_link!(&self.link, l => l.last_sequence()));
         let silence = Duration::try_from_secs_f64(timeout).map_err(error)?;
         let logger = py.import("logging")?.call_method1("getLogger", ("slamd",))?;
         let mut failed: Option<PyErr> = None;
         let mut last_look = Instant::now();
-        let done = self
-            .link
-            .wait_acknowledged_with(sequence, silence, |w| {
-                let said = if w.say {
-                    logger.call_method1("warning", (w.to_string(),)).map(drop)
-                } else {
-                    Ok(())
-                };
-                // the waits keep the GIL (the iceoryx2 ports cannot leave
-                // their thread): look for Ctrl-C every SLICE
-                let checked = if last_look.elapsed() >= SLICE {
-                    last_look = Instant::now();
-                    py.check_signals()
-                } else {
-                    Ok(())
-                };
-                match said.and(checked) {
-                    Ok(()) => true,
-                    Err(e) => {
-                        failed = Some(e);
-                        false
-                    }
+        let done = on_link!(&mut self.link, l => l.wait_acknowledged_with(sequence, silence, |w| {
+            let said = if w.say {
+                logger.call_method1("warning", (w.to_string(),)).map(drop)
+            } else {
+                Ok(())
+            };
+            // the waits keep the GIL (the iceoryx2 ports cannot leave
+            // their thread): look for Ctrl-C every SLICE
+            let checked = if last_look.elapsed() >= SLICE {
+                last_look = Instant::now();
+                py.check_signals()
+            } else {
+                Ok(())
+            };
+            match said.and(checked) {
+                Ok(()) => true,
+                Err(e) => {
+                    failed = Some(e);
+                    false
                 }
-            })
-            .map_err(error)?;
+            }
+        }))
+        .map_err(error)?;
         match failed {
             Some(e) => Err(e),
             None => Ok(done),

@@ -26,7 +26,7 @@ pub trait EdgeCost: RigidMotion {
 impl EdgeCost for Pose2 {
     type Error = [f64; 3];
     fn edge_error(edge: &Edge, xi: &Pose2, xj: &Pose2) -> [f64; 3] {
-        edge_error(edge, xi, xj)
+        edge_error_turned(edge, xi, xi.rotation(), xj, edge.measurement.rotation())
     }
     fn mahalanobis(information: &super::Information, e: &[f64; 3]) -> f64 {
         information.mahalanobis(e)
@@ -36,9 +36,10 @@ impl EdgeCost for Pose2 {
     }
 }
 
-/// The error vector `[e_x, e_y, e_θ]` of one edge at poses `xi`, `xj`.
-pub fn edge_error(edge: &Edge, xi: &Pose2, xj: &Pose2) -> [f64; 3] {
-    edge_error_turned(edge, xi, xi.rotation(), xj, edge.measurement.rotation())
+/// The error vector of one edge at poses `xi`, `xj`: `[e_x, e_y, e_θ]` in
+/// the plane, `[Δt, Δq_xyz]` in space.
+pub fn edge_error<P: EdgeCost>(edge: &Edge<P>, xi: &P, xj: &P) -> P::Error {
+    P::edge_error(edge, xi, xj)
 }
 
 /// [`edge_error`] with the rotations `e^{iθ}` of `xi` and of the

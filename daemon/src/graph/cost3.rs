@@ -12,7 +12,7 @@ use nalgebra::{Quaternion, Vector3};
 /// The residual motion of an edge, `Δ = Z⁻¹ X_i⁻¹ X_j`, and its quaternion
 /// with `w ≥ 0`: what the error and its Jacobians are built from.
 #[derive(Clone, Copy, Debug)]
-pub struct Delta3 {
+pub(crate) struct Delta3 {
     /// `Δ`.
     pub motion: Pose3,
     /// The quaternion of `Δ`, sign chosen so that `w ≥ 0`.
@@ -41,15 +41,10 @@ impl Delta3 {
     }
 }
 
-/// The error `[Δt, Δq_xyz]` of one 3-D edge at poses `xi`, `xj`.
-pub fn edge_error3(edge: &Edge<Pose3>, xi: &Pose3, xj: &Pose3) -> [f64; 6] {
-    Delta3::new(edge, xi, xj).error()
-}
-
 impl EdgeCost for Pose3 {
     type Error = [f64; 6];
     fn edge_error(edge: &Edge<Pose3>, xi: &Pose3, xj: &Pose3) -> [f64; 6] {
-        edge_error3(edge, xi, xj)
+        Delta3::new(edge, xi, xj).error()
     }
     fn mahalanobis(information: &Information6, e: &[f64; 6]) -> f64 {
         information.mahalanobis(e)
@@ -63,7 +58,7 @@ impl EdgeCost for Pose3 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::graph::{edge_chi2, EdgeKind};
+    use crate::graph::{edge_chi2, edge_error, EdgeKind};
     use nalgebra::UnitQuaternion;
 
     fn edge(z: Pose3, information: Information6) -> Edge<Pose3> {
@@ -80,7 +75,7 @@ mod tests {
     fn error_is_zero_on_a_consistent_edge() {
         let xi = Pose3::from_xyz_rpy([1.0, 2.0, -0.5, 0.3, -0.2, 1.0]);
         let xj = Pose3::from_xyz_rpy([-1.0, 4.0, 0.5, -0.1, 0.4, 2.0]);
-        let e = edge_error3(&edge(xi.between(&xj), Information6::identity()), &xi, &xj);
+        let e = edge_error(&edge(xi.between(&xj), Information6::identity()), &xi, &xj);
         assert!(e.iter().all(|v| v.abs() < 1e-12), "{e:?}");
     }
 
@@ -95,7 +90,7 @@ mod tests {
         let mut u = Information6::identity().upper();
         u[20] = 100.0;
         let e = edge(Pose3::IDENTITY, Information6::from_upper(u).unwrap());
-        let err = edge_error3(&e, &xi, &xj);
+        let err = edge_error(&e, &xi, &xj);
         assert!(
             (err[2] - 1.0).abs() < 1e-15 && (err[5] - 0.2f64.sin()).abs() < 1e-15,
             "{err:?}"
@@ -114,7 +109,7 @@ mod tests {
             UnitQuaternion::from_axis_angle(&Vector3::z_axis(), std::f64::consts::FRAC_PI_2),
         );
         let xj = Pose3::new(Vector3::new(2.0, 0.0, 0.0), z.rotation);
-        let err = edge_error3(&edge(z, Information6::identity()), &Pose3::IDENTITY, &xj);
+        let err = edge_error(&edge(z, Information6::identity()), &Pose3::IDENTITY, &xj);
         assert!(err[0].abs() < 1e-12 && (err[1] + 1.0).abs() < 1e-12, "{err:?}");
     }
 }

@@ -9,7 +9,7 @@ mod cost3;
 mod edge;
 
 pub use cost::{chi2, chi2_of_edges, edge_chi2, edge_error, edge_error_turned, EdgeCost};
-pub use cost3::{edge_error3, Delta3};
+pub(crate) use cost3::Delta3;
 pub use edge::Edge;
 use slamd_types::EdgeInput;
 pub use slamd_types::{

@@ -157,7 +157,7 @@ impl LiePose for Pose3 {
     }
 
     fn asc_scale(edge: &Edge<Pose3>, xi: &Pose3, xj: &Pose3) -> f64 {
-        let e = crate::graph::edge_error3(edge, xi, xj);
+        let e = crate::graph::edge_error(edge, xi, xj);
         let euclid: f64 = e.iter().map(|v| v * v).sum();
         euclid * edge.information.covariance().determinant()
     }

@@ -66,7 +66,7 @@ pub fn retract(x: &Pose3, delta: &Vector6<f64>) -> Pose3 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::graph::{edge_error3, EdgeKind, Information6};
+    use crate::graph::{edge_error, EdgeKind, Information6};
 
     #[test]
     fn jacobians_match_finite_differences() {
@@ -91,11 +91,11 @@ mod tests {
                 d[k] = h;
                 let (plus_i, minus_i) = (retract(&xi, &d), retract(&xi, &-d));
                 let (plus_j, minus_j) = (retract(&xj, &d), retract(&xj, &-d));
-                let fd_i = (Vector6::from(edge_error3(&edge, &plus_i, &xj))
-                    - Vector6::from(edge_error3(&edge, &minus_i, &xj)))
+                let fd_i = (Vector6::from(edge_error(&edge, &plus_i, &xj))
+                    - Vector6::from(edge_error(&edge, &minus_i, &xj)))
                     / (2.0 * h);
-                let fd_j = (Vector6::from(edge_error3(&edge, &xi, &plus_j))
-                    - Vector6::from(edge_error3(&edge, &xi, &minus_j)))
+                let fd_j = (Vector6::from(edge_error(&edge, &xi, &plus_j))
+                    - Vector6::from(edge_error(&edge, &xi, &minus_j)))
                     / (2.0 * h);
                 for r in 0..6 {
                     assert!(
@@ -112,7 +112,7 @@ mod tests {
                     );
                 }
             }
-            assert_eq!(e, Vector6::from(edge_error3(&edge, &xi, &xj)));
+            assert_eq!(e, Vector6::from(edge_error(&edge, &xi, &xj)));
         }
     }
 

@@ -12,7 +12,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use slamd::config::Config;
 use slamd::eval::{aligned_onto, ate, Aligned};
 use slamd::geometry::Pose2;
-use slamd::graph::{chi2, KeyframeId, Pose3, PoseGraph};
+use slamd::graph::{chi2, KeyframeId, Pose3, PoseGraph, RigidMotion};
 use slamd::io::{svg, AnyGraph, OnInvalid};
 use slamd::synthetic::{generate, generate_building, gps_fixes, GpsParams, WorldParams};
 use std::collections::HashMap;
@@ -192,7 +192,7 @@ fn show<P: DemoPose>(
     );
     let daemon = Daemon::start(&namespace, P::DIMENSION)?;
     let viewer = Daemon::view(&namespace, opts)?;
-    let mut sink = connect(&namespace, &config, P::DIMENSION)?;
+    let mut sink = connect::<P>(&namespace, &config)?;
 
     println!(
         "{name}: {} keyframes, {} edges, streamed over shared memory",
@@ -290,10 +290,10 @@ fn show<P: DemoPose>(
 }
 
 /// Connects once the daemon's services exist (it needs a moment to start).
-fn connect(namespace: &str, config: &Config, dimension: u32) -> anyhow::Result<DaemonSink> {
+fn connect<P: RigidMotion>(namespace: &str, config: &Config) -> anyhow::Result<DaemonSink<P>> {
     let deadline = Instant::now() + Duration::from_secs(10);
     loop {
-        match DaemonSink::connect(namespace, config, Duration::from_secs(10), None, dimension) {
+        match DaemonSink::connect(namespace, config, Duration::from_secs(10), None) {
             Ok(sink) => return Ok(sink),
             Err(e) if Instant::now() < deadline => {
                 tracing::debug!(error = %e, "Daemon not up yet.");

@@ -336,7 +336,7 @@ fn sink<P: ReplayPose>(opts: &ReplayOpts, config: &Config) -> anyhow::Result<Box
         return Ok(Box::new(EmbeddedSink(engine, pace)));
     }
     let timeout = Duration::from_secs_f64(opts.timeout);
-    let daemon = DaemonSink::connect(&config.namespace, config, timeout, opts.rate, P::DIMENSION)?;
+    let daemon = DaemonSink::<P>::connect(&config.namespace, config, timeout, opts.rate)?;
     Ok(Box::new(daemon))
 }
 

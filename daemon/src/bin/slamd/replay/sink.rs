@@ -6,9 +6,8 @@ use faer::c64;
 use slamd::config::Config;
 use slamd::engine::{Engine, EnginePose, EngineStats};
 use slamd::geometry::Pose2;
-use slamd::graph::{KeyframeId, Pose3};
+use slamd::graph::{KeyframeId, Pose3, RigidMotion};
 use slamd::ipc::{Frontend, Snapshots};
-use slamd_protocol::Pose;
 use std::collections::{HashMap, VecDeque};
 use std::time::{Duration, Instant};
 
@@ -53,8 +52,6 @@ pub struct EmbeddedSink<P: EnginePose = Pose2>(pub Engine<P>, pub Option<(Instan
 pub trait ReplayPose: EnginePose {
     /// The georeferenced (east, north) of every keyframe, once georeferenced.
     fn enu(engine: &Engine<Self>) -> HashMap<KeyframeId, c64>;
-    /// A snapshot's pose, `None` if it does not make one.
-    fn from_wire(p: &Pose) -> Option<Self>;
 }
 
 impl ReplayPose for Pose2 {
@@ -62,17 +59,11 @@ impl ReplayPose for Pose2 {
         let snap = engine.snapshot();
         snap.enu_poses().map(|(id, p)| (id, p.position())).collect()
     }
-    fn from_wire(p: &Pose) -> Option<Self> {
-        Some(p.pose2())
-    }
 }
 
 impl ReplayPose for Pose3 {
     fn enu(_: &Engine<Pose3>) -> HashMap<KeyframeId, c64> {
         HashMap::new()
-    }
-    fn from_wire(p: &Pose) -> Option<Self> {
-        p.pose3()
     }
 }
 
@@ -135,8 +126,8 @@ impl<P: ReplayPose> Sink<P> for EmbeddedSink<P> {
 }
 
 /// A running daemon, over shared memory.
-pub struct DaemonSink {
-    frontend: Frontend,
+pub struct DaemonSink<P: RigidMotion> {
+    frontend: Frontend<P>,
     snapshots: Snapshots,
     timeout: Duration,
     namespace: String,
@@ -152,16 +143,16 @@ pub struct DaemonSink {
     said: Option<Instant>,
 }
 
-impl DaemonSink {
+impl<P: RigidMotion> DaemonSink<P> {
     /// Connects to the daemon serving `namespace`, which must serve graphs
-    /// of `dimension`.
+    /// of `P`'s dimension.
     pub fn connect(
         namespace: &str,
         config: &Config,
         timeout: Duration,
         rate: Option<f64>,
-        dimension: u32,
     ) -> anyhow::Result<Self> {
+        let dimension = P::DIMENSION;
         let endpoint = slamd::ipc::Endpoint {
             namespace: namespace.to_string(),
             ..config.into()
@@ -268,7 +259,7 @@ fn served_dimension(snapshots: &Snapshots) -> anyhow::Result<Option<u32>> {
     }
 }
 
-impl<P: ReplayPose> Sink<P> for DaemonSink {
+impl<P: ReplayPose> Sink<P> for DaemonSink<P> {
     fn keyframe(&mut self, k: usize, step: &Step<P>) -> anyhow::Result<Vec<(usize, f64)>> {
         let mut done = Vec::new();
         if let Some((start, period)) = self.pace {
@@ -279,9 +270,9 @@ impl<P: ReplayPose> Sink<P> for DaemonSink {
             }
         }
         let arrival = Instant::now();
-        let mut last = self.frontend.publish_keyframe::<P>(step.id, 0, None)?;
+        let mut last = self.frontend.add_keyframe(step.id, 0, None)?;
         for e in &step.edges {
-            last = self.frontend.publish_edge(e)?;
+            last = self.frontend.add_edge(e)?;
         }
         for f in &step.fixes {
             last = self.frontend.add_gps(f)?;
@@ -317,8 +308,9 @@ impl<P: ReplayPose> Sink<P> for DaemonSink {
         let s = self.latest.as_ref().ok_or_else(|| self.no_answer())?;
         (s.poses().iter())
             .map(|p| {
-                let pose =
-                    P::from_wire(p).ok_or_else(|| anyhow::anyhow!("keyframe {}: {p:?} is not a pose", p.id));
+                let pose = p
+                    .pose::<P>()
+                    .ok_or_else(|| anyhow::anyhow!("keyframe {}: {p:?} is not a pose", p.id));
                 Ok((p.id, pose?))
             })
             .collect()
