@@ -27,12 +27,25 @@ enum Link {
     Spatial(slamd_protocol::Frontend<Pose3>),
 }
 
-/// `$body` with `$l` bound to the connection, whatever its dimension.
+/// `$body` with `$l` bound to the connection and `$P` to its pose type,
+/// whatever its dimension.
 macro_rules! on_link {
     ($link:expr, $l:ident => $body:expr) => {
         match $link {
             Link::Planar($l) => $body,
             Link::Spatial($l) => $body,
+        }
+    };
+    ($link:expr, $l:ident, $P:ident => $body:expr) => {
+        match $link {
+            Link::Planar($l) => {
+                type $P = Pose2;
+                $body
+            }
+            Link::Spatial($l) => {
+                type $P = Pose3;
+                $body
+            }
         }
     };
 }
@@ -75,17 +88,10 @@ impl Frontend {
         guess: Option<&Bound<'_, PyAny>>,
         timestamp_ns: u64,
     ) -> PyResult<u64> {
-        match &mut self.link {
-            Link::Planar(l) => {
-                let guess = guess.map(convert::pose::<Pose2>).transpose()?;
-                l.add_keyframe(id, timestamp_ns, guess)
-            }
-            Link::Spatial(l) => {
-                let guess = guess.map(convert::pose::<Pose3>).transpose()?;
-                l.add_keyframe(id, timestamp_ns, guess)
-            }
-        }
-        .map_err(error)
+        on_link!(&mut self.link, l, P => {
+            let guess = guess.map(convert::pose::<P>).transpose()?;
+            l.add_keyframe(id, timestamp_ns, guess).map_err(error)
+        })
     }
 
     /// Publishes an edge, as `Engine.add_edge` takes it. Returns its
@@ -99,11 +105,10 @@ impl Frontend {
         information: &Bound<'_, PyAny>,
         kind: Option<&str>,
     ) -> PyResult<u64> {
-        match &mut self.link {
-            Link::Planar(l) => l.add_edge(&convert::edge(from_id, to_id, measurement, information, kind)?),
-            Link::Spatial(l) => l.add_edge(&convert::edge(from_id, to_id, measurement, information, kind)?),
-        }
-        .map_err(error)
+        on_link!(&mut self.link, l, P => {
+            let edge = convert::edge::<P>(from_id, to_id, measurement, information, kind)?;
+            l.add_edge(&edge).map_err(error)
+        })
     }
 
     /// Publishes a GPS fix, as `Engine.add_gps` takes it.

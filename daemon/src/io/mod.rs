@@ -292,13 +292,20 @@ fn assemble<P: RigidMotion>(
 
 /// Parses `n` finite numbers from `tokens`, naming the record on error.
 pub(crate) fn numbers<const N: usize>(tokens: &[&str], record: &str) -> Result<[f64; N], ReadErrorKind> {
-    if tokens.len() != N {
+    let mut out = [0.0; N];
+    numbers_into(tokens, record, &mut out)?;
+    Ok(out)
+}
+
+/// [`numbers`] into `out`, as many as it holds.
+pub(crate) fn numbers_into(tokens: &[&str], record: &str, out: &mut [f64]) -> Result<(), ReadErrorKind> {
+    if tokens.len() != out.len() {
         return Err(ReadErrorKind::Malformed(format!(
-            "{record} needs {N} numbers after the tag, found {}",
+            "{record} needs {} numbers after the tag, found {}",
+            out.len(),
             tokens.len()
         )));
     }
-    let mut out = [0.0; N];
     for (o, t) in out.iter_mut().zip(tokens) {
         let v: f64 = t
             .parse()
@@ -310,7 +317,7 @@ pub(crate) fn numbers<const N: usize>(tokens: &[&str], record: &str) -> Result<[
         }
         *o = v;
     }
-    Ok(out)
+    Ok(())
 }
 
 /// Parses a keyframe id.

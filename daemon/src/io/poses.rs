@@ -1,21 +1,35 @@
-//! Pose tables (`id x y θ` or `x y θ` per line) and ground truth.
+//! Pose tables (`id x y θ` or `x y θ` per line in the plane,
+//! `id x y z qx qy qz qw` or without the id in space) and ground truth.
 
-use super::{numbers, read_graph, ReadError, ReadErrorKind};
+use super::{numbers_into, read_graph, ReadError, ReadErrorKind};
 use crate::geometry::Pose2;
 use crate::graph::{KeyframeId, Pose3, RigidMotion};
 use std::collections::HashMap;
 use std::path::Path;
 
-/// Reads a pose table: `id x y θ` per line, or `x y θ` where the id is the
-/// line's position among the data lines. `#` starts a comment.
-pub fn read_pose_table(path: &Path) -> Result<HashMap<KeyframeId, Pose2>, ReadError> {
+/// Reads a pose table: per line an id and the pose's
+/// [`RigidMotion::PARAMS`] numbers (`id x y θ`; in space
+/// `id x y z qx qy qz qw`), or the numbers alone where the id is the line's
+/// position among the data lines. `#` starts a comment; commas separate
+/// like spaces.
+pub fn read_pose_table<P: RigidMotion>(path: &Path) -> Result<HashMap<KeyframeId, P>, ReadError> {
     let text = std::fs::read_to_string(path).map_err(|e| ReadError::io(path, e))?;
     parse_pose_table(path, &text)
 }
 
-pub(crate) fn parse_pose_table(path: &Path, text: &str) -> Result<HashMap<KeyframeId, Pose2>, ReadError> {
+pub(crate) fn parse_pose_table<P: RigidMotion>(
+    path: &Path,
+    text: &str,
+) -> Result<HashMap<KeyframeId, P>, ReadError> {
+    let layout = if P::DIMENSION == 2 {
+        "`id x y theta` or `x y theta`"
+    } else {
+        "`id x y z qx qy qz qw` or `x y z qx qy qz qw`"
+    };
     let mut poses = HashMap::new();
     let mut row: KeyframeId = 0;
+    let mut params = [0.0; 7];
+    let params = &mut params[..P::PARAMS];
     for (n, line) in text.lines().enumerate() {
         let content = line.split('#').next().unwrap_or("").trim();
         if content.is_empty() {
@@ -26,19 +40,23 @@ pub(crate) fn parse_pose_table(path: &Path, text: &str) -> Result<HashMap<Keyfra
             .filter(|t| !t.is_empty())
             .collect();
         let at = |kind| ReadError::at(path, n + 1, kind);
-        let (id, xyz) = match tokens.len() {
-            3 => (row, numbers::<3>(&tokens, "pose").map_err(at)?),
-            4 => {
-                let id = super::id(tokens[0], "pose").map_err(at)?;
-                (id, numbers::<3>(&tokens[1..], "pose").map_err(at)?)
-            }
-            k => {
+        let id = match tokens.len().checked_sub(P::PARAMS) {
+            Some(0) => row,
+            Some(1) => super::id(tokens[0], "pose").map_err(at)?,
+            _ => {
                 return Err(at(ReadErrorKind::Malformed(format!(
-                    "pose line needs `id x y theta` or `x y theta`, found {k} fields"
+                    "pose line needs {layout}, found {} fields",
+                    tokens.len()
                 ))))
             }
         };
-        if poses.insert(id, Pose2::new(xyz[0], xyz[1], xyz[2])).is_some() {
+        numbers_into(&tokens[tokens.len() - P::PARAMS..], "pose", params).map_err(at)?;
+        let pose = P::from_params(params).ok_or_else(|| {
+            at(ReadErrorKind::Malformed(
+                "pose: its quaternion is not of unit norm".into(),
+            ))
+        })?;
+        if poses.insert(id, pose).is_some() {
             return Err(at(ReadErrorKind::Malformed(format!("duplicate pose id {id}"))));
         }
         row += 1;
@@ -107,14 +125,33 @@ mod tests {
     #[test]
     fn reads_both_table_layouts() {
         let p = Path::new("gt.txt");
-        let a = parse_pose_table(p, "0 0 0 0\n1 1.5 0 0.1\n").unwrap();
+        let a = parse_pose_table::<Pose2>(p, "0 0 0 0\n1 1.5 0 0.1\n").unwrap();
         assert_eq!(a[&1], Pose2::new(1.5, 0.0, 0.1));
-        let b = parse_pose_table(p, "# x y t\n0 0 0\n2 0 0\n").unwrap();
+        let b = parse_pose_table::<Pose2>(p, "# x y t\n0 0 0\n2 0 0\n").unwrap();
         assert_eq!(b[&1], Pose2::new(2.0, 0.0, 0.0));
-        let err = parse_pose_table(p, "0 0 0\n1 2\n").unwrap_err();
+        let err = parse_pose_table::<Pose2>(p, "0 0 0\n1 2\n").unwrap_err();
         assert_eq!(
             err.to_string(),
             "gt.txt:2: pose line needs `id x y theta` or `x y theta`, found 2 fields"
+        );
+    }
+
+    #[test]
+    fn reads_spatial_tables_and_refuses_a_quaternion_off_unit_norm() {
+        let p = Path::new("est.txt");
+        let t = parse_pose_table::<Pose3>(p, "4 1 2 3 0 0 0.6 0.8\n").unwrap();
+        let q = t[&4].rotation;
+        assert_eq!(t[&4].translation.as_slice(), &[1.0, 2.0, 3.0]);
+        assert!((q.k - 0.6).abs() < 1e-15 && (q.w - 0.8).abs() < 1e-15, "{q:?}");
+        let err = parse_pose_table::<Pose3>(p, "0 0 0 0 0 0 0.5\n").unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            "est.txt:1: pose: its quaternion is not of unit norm"
+        );
+        let err = parse_pose_table::<Pose3>(p, "0 0 0 0\n").unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            "est.txt:1: pose line needs `id x y z qx qy qz qw` or `x y z qx qy qz qw`, found 4 fields"
         );
     }
 }

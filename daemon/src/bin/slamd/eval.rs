@@ -3,7 +3,7 @@
 
 use anyhow::Context;
 use clap::Args;
-use slamd::graph::{EdgeCost, KeyframeId, Pose3, PoseGraph, RigidMotion};
+use slamd::graph::{EdgeCost, KeyframeId, PoseGraph, RigidMotion};
 use slamd::io;
 use std::collections::HashMap;
 use std::path::PathBuf;
@@ -27,41 +27,35 @@ pub struct EvalOpts {
 
 pub fn run(opts: EvalOpts) -> anyhow::Result<()> {
     match io::read_any_graph_with(&opts.graph, io::OnInvalid::Refuse)?.0 {
-        io::AnyGraph::Planar(graph) => {
-            let table = if let Some(layout) = io::Trajectory::of(&opts.poses) {
-                io::read_trajectory(&opts.poses, layout, &crate::solve::keyframe_ids(&graph))?
-            } else if opts.poses.extension().is_some_and(|e| e == "g2o") {
-                vertices(&io::read_graph::<slamd::geometry::Pose2>(&opts.poses)?)
-            } else {
-                io::read_pose_table(&opts.poses)?
-            };
-            let truth = opts
-                .ground_truth
-                .as_deref()
-                .map(io::read_ground_truth)
-                .transpose()?;
-            score(&opts, &graph, &table, |poses| {
-                truth.as_ref().and_then(|t| slamd::eval::ate(&graph, poses, t))
-            })
-        }
-        io::AnyGraph::Spatial(graph) => {
-            let table = if let Some(layout) = io::Trajectory::of(&opts.poses) {
-                io::read_trajectory(&opts.poses, layout, &crate::solve::keyframe_ids(&graph))?
-            } else if opts.poses.extension().is_some_and(|e| e == "g2o") {
-                vertices(&io::read_graph::<Pose3>(&opts.poses)?)
-            } else {
-                read_table3(&opts.poses)?
-            };
-            let truth = opts
-                .ground_truth
-                .as_deref()
-                .map(io::read_ground_truth)
-                .transpose()?;
-            score(&opts, &graph, &table, |poses| {
-                truth.as_ref().and_then(|t| slamd::eval::ate(&graph, poses, t))
-            })
-        }
+        io::AnyGraph::Planar(graph) => eval(&opts, &graph),
+        io::AnyGraph::Spatial(graph) => eval(&opts, &graph),
     }
+}
+
+/// What `slamd eval` needs of a pose: its cost, its file and table forms,
+/// its ground truth and its alignment.
+trait EvalPose: EdgeCost + io::FilePose + io::FromSpatial + io::TruthPose + slamd::eval::Aligned {}
+
+impl<P: EdgeCost + io::FilePose + io::FromSpatial + io::TruthPose + slamd::eval::Aligned> EvalPose for P {}
+
+/// Reads the poses and the ground truth in `graph`'s dimension and scores
+/// them.
+fn eval<P: EvalPose>(opts: &EvalOpts, graph: &PoseGraph<P>) -> anyhow::Result<()> {
+    let table = if let Some(layout) = io::Trajectory::of(&opts.poses) {
+        io::read_trajectory(&opts.poses, layout, &crate::solve::keyframe_ids(graph))?
+    } else if opts.poses.extension().is_some_and(|e| e == "g2o") {
+        vertices(&io::read_graph::<P>(&opts.poses)?)
+    } else {
+        io::read_pose_table(&opts.poses)?
+    };
+    let truth = opts
+        .ground_truth
+        .as_deref()
+        .map(io::read_ground_truth)
+        .transpose()?;
+    score(opts, graph, &table, |poses| {
+        truth.as_ref().and_then(|t| slamd::eval::ate(graph, poses, t))
+    })
 }
 
 /// The vertices of a graph file, by keyframe id.
@@ -104,31 +98,4 @@ fn score<P: EdgeCost>(
         }
     }
     Ok(())
-}
-
-/// `id x y z qx qy qz qw` lines.
-fn read_table3(path: &std::path::Path) -> anyhow::Result<HashMap<KeyframeId, Pose3>> {
-    let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-    let mut table = HashMap::new();
-    for (n, line) in text
-        .lines()
-        .enumerate()
-        .filter(|(_, l)| !l.trim().is_empty() && !l.starts_with('#'))
-    {
-        let bad = || format!("{}:{}: expected `id x y z qx qy qz qw`", path.display(), n + 1);
-        let f: Vec<&str> = line.split_whitespace().collect();
-        let id: u64 = f.first().and_then(|t| t.parse().ok()).with_context(bad)?;
-        let v: Vec<f64> = f[1..]
-            .iter()
-            .map(|t| t.parse::<f64>())
-            .collect::<Result<_, _>>()
-            .ok()
-            .with_context(bad)?;
-        let pose = <[f64; 7]>::try_from(v)
-            .ok()
-            .and_then(Pose3::from_xyz_quaternion)
-            .with_context(bad)?;
-        table.insert(id, pose);
-    }
-    Ok(table)
 }

@@ -13,10 +13,11 @@ use clap::Args;
 use faer::c64;
 use slamd::config::Config;
 use slamd::engine::{EdgeInput, Engine, EngineConfig, FactorWork, FixInput};
+use slamd::eval::Aligned;
 use slamd::geometry::Pose2;
 use slamd::graph::{KeyframeId, PoseGraph, RigidMotion};
 use slamd::io;
-use slamd::solver::{solve_batch, BatchOptions};
+use slamd::solver::{solve_batch, BatchOptions, BatchPose};
 use std::collections::HashMap;
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
@@ -285,18 +286,8 @@ pub fn run(opts: ReplayOpts) -> anyhow::Result<()> {
     if let Some(path) = &opts.out {
         crate::solve::write_result(path, &graph, &out.poses)?;
     }
-    let ate = truth
-        .as_ref()
-        .and_then(|t| slamd::eval::ate(&graph, &out.poses, t))
-        .map(|a| a.rmse);
     let georeferenced = !out.enu.is_empty();
-    let report = Report::of(&graph, out, sink.mode(), sink.engine_stats(), ate, |prefix| {
-        let options = BatchOptions {
-            polish: true,
-            ..Default::default()
-        };
-        Ok(solve_batch(prefix, &options)?.chi2)
-    })?;
+    let report = report(&graph, out, sink.as_ref(), truth.as_ref())?;
     if opts.json {
         let extra = serde_json::json!({
             "gps_fixes": fixes.len(),
@@ -312,6 +303,26 @@ pub fn run(opts: ReplayOpts) -> anyhow::Result<()> {
         });
     }
     Ok(())
+}
+
+/// The report of a replay into `sink`: the final poses' ATE against
+/// `truth`, the sampled prefixes against their polished batch optimum.
+fn report<P: ReplayPose + BatchPose + Aligned>(
+    graph: &PoseGraph<P>,
+    out: Outcome<P>,
+    sink: &dyn Sink<P>,
+    truth: Option<&HashMap<KeyframeId, P>>,
+) -> anyhow::Result<Report> {
+    let ate = truth
+        .and_then(|t| slamd::eval::ate(graph, &out.poses, t))
+        .map(|a| a.rmse);
+    Report::of(graph, out, sink.mode(), sink.engine_stats(), ate, |prefix| {
+        let options = BatchOptions {
+            polish: true,
+            ..Default::default()
+        };
+        Ok(solve_batch(prefix, &options)?.chi2)
+    })
 }
 
 /// The keyframe counts after which `--check-prefixes` samples a snapshot.

@@ -2,12 +2,11 @@
 //! daemon serving 3-D graphs, the same stream, latency and prefix checks
 //! as in 2-D.
 
-use super::{replay, ReplayOpts, Report};
+use super::{replay, ReplayOpts};
 use anyhow::bail;
 use slamd::config::Config;
 use slamd::graph::{Pose3, PoseGraph};
 use slamd::io;
-use slamd::solver::{solve_batch, BatchOptions};
 
 pub fn run(
     opts: &ReplayOpts,
@@ -36,18 +35,8 @@ pub fn run(
             None => io::write_g2o(&mut w, &graph, &out.poses)?,
         }
     }
-    let ate = truth
-        .as_ref()
-        .and_then(|t| slamd::eval::ate(&graph, &out.poses, t))
-        .map(|a| a.rmse);
-    let (mode, stats) = (sink.mode(), sink.engine_stats());
-    let report = Report::of(&graph, out, mode, stats, ate, |prefix| {
-        let options = BatchOptions {
-            polish: true,
-            ..Default::default()
-        };
-        Ok(solve_batch(prefix, &options)?.chi2)
-    })?;
+    let mode = sink.mode();
+    let report = super::report(&graph, out, sink.as_ref(), truth.as_ref())?;
     if opts.json {
         println!(
             "{}",
