@@ -289,10 +289,12 @@ impl<P: EnginePose> Engine<P> {
             );
             moved = self.resolve_inline(Polish::Inline);
             resolved = true;
-        } else if self.background.running() && self.schedule.filled(&self.config, &self.state) {
+        } else if (self.background.running() || !self.config.background)
+            && self.schedule.filled(&self.config, &self.state)
+        {
             // no refresh lands while a re-solve holds the background
-            // thread, and the keyframes appended meanwhile fill the
-            // factor in
+            // thread (or with none), and the keyframes appended meanwhile
+            // fill the factor in
             self.reorder_inline();
         }
         self.background.forward_estimates(&self.state);

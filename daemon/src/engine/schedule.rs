@@ -39,7 +39,9 @@ impl Schedule {
     pub fn resolve_due<P: EnginePose>(&self, config: &EngineConfig, state: &State<P>) -> bool {
         let c = config;
         let by_count = c.resolve_every_edges > 0 && self.edges_since_resolve >= c.resolve_every_edges;
-        let by_fill = self.filled(config, state);
+        // inline, a filled factor is refactorised (`Engine::update`): a
+        // robust re-solve is a statistical decision, not a remedy for fill
+        let by_fill = c.background && self.filled(config, state);
         // the count of fixes on joined keyframes is a scan, so it waits
         // until all fixes together could pass
         let due = |fixes: usize| fixes >= 2 && fixes >= 2 * self.fixes_at_resolve.max(1);
