@@ -36,6 +36,9 @@ pub struct DynamicLdlt<T> {
     /// With a right-hand side, the last row and pivot of the factor of
     /// the augmented matrix (see [`DynamicLdlt::augment`]).
     pub(crate) augmented: Option<Augmented<T>>,
+    /// Σ of the columns' row counts: [`Self::nnz`] without a scan (patterns
+    /// only grow).
+    pub(crate) stored: usize,
 }
 
 /// The last row of the factor of `[A b; bᴴ β]` = `[L 0; zᴴ 1]
@@ -70,6 +73,7 @@ impl<T: Scalar> DynamicLdlt<T> {
             scratch: WalkScratch::new(0),
             walked: WalkStats::default(),
             augmented: None,
+            stored: 0,
         }
     }
 
@@ -211,6 +215,7 @@ impl<T: Scalar> DynamicLdlt<T> {
             return Err(FactorError::NotPositiveDefinite { step: k });
         }
         self.d.push(d);
+        self.stored += rows.len();
         self.cols.push(Column { rows, vals, starts });
         Ok(())
     }
@@ -299,9 +304,10 @@ impl<T: Scalar> DynamicLdlt<T> {
         self.cols.is_empty()
     }
 
-    /// Stored entries of `L` below the diagonal.
+    /// Stored entries of `L` below the diagonal, in O(1).
     pub fn nnz(&self) -> usize {
-        self.cols.iter().map(|c| c.rows.len()).sum()
+        debug_assert_eq!(self.stored, self.cols.iter().map(|c| c.rows.len()).sum::<usize>());
+        self.stored
     }
 
     /// `D_k`.

@@ -275,6 +275,7 @@ impl<T: Scalar> DynamicLdlt<T> {
             col.vals.resize(col.rows.len(), T::default());
             added.extend_from_slice(&extra[tail..]);
             extend_run_starts(&col.rows, old, &mut col.starts);
+            self.stored += added.len();
             return;
         }
         let (rows, vals) = (&mut self.scratch.rows, &mut self.scratch.vals);
@@ -300,6 +301,7 @@ impl<T: Scalar> DynamicLdlt<T> {
         std::mem::swap(&mut col.rows, rows);
         std::mem::swap(&mut col.vals, vals);
         run_starts(&col.rows, &mut col.starts);
+        self.stored += added.len();
     }
 }
 
