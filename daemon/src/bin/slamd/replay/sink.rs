@@ -319,17 +319,26 @@ impl<P: ReplayPose> Sink<P> for DaemonSink<P> {
     fn finish(&mut self) -> anyhow::Result<(HashMap<KeyframeId, P>, usize, Instant)> {
         Sink::<P>::drain(self)?;
         // the daemon re-solves once input pauses, and again if edges came
-        // in during that re-solve: take snapshots until it is quiet (the
-        // first re-solved one may predate the last edges' polish)
+        // in during that re-solve, and its filter's judge decides the loop
+        // closures still pending: take snapshots until none is pending and
+        // it is quiet (the first re-solved one may predate the last edges'
+        // polish), for as long as the daemon shows it is alive
         let mut ready = Instant::now();
-        let deadline = ready + self.timeout.max(Duration::from_secs(30));
-        while Instant::now() < deadline {
-            match self.snapshots.wait(QUIET)? {
-                Some(s) => {
-                    self.latest = Some(s);
-                    ready = Instant::now();
-                }
-                None => break,
+        loop {
+            if let Some(s) = self.snapshots.wait(QUIET)? {
+                self.latest = Some(s);
+                (ready, self.heard) = (Instant::now(), Instant::now());
+                continue;
+            }
+            let pending = self.latest.as_ref().map_or(0, |s| s.header().pending);
+            if pending == 0 {
+                break;
+            }
+            if self.snapshots.status()?.is_some() {
+                self.heard = Instant::now();
+            }
+            if self.heard.elapsed() > self.timeout {
+                return Err(self.no_answer());
             }
         }
         let resolves = self.latest.as_ref().map_or(0, |s| s.header().resolves as usize);
