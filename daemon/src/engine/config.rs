@@ -21,8 +21,9 @@ pub struct EngineConfig {
     /// and refactorise with a fresh ordering, without the polish (one
     /// Gauss–Newton iteration; 0: never). Default 50.
     pub refresh_every_edges: usize,
-    /// Re-solve when the factor holds this many times the entries it had
-    /// when last fresh; while a re-solve runs, refactorise inline with a
+    /// Re-solve in the background when the factor holds this many times
+    /// the entries it had when last fresh; while a re-solve runs, or with
+    /// everything inline (`background` off), refactorise inline with a
     /// fresh ordering instead (0: neither). Default 2.
     pub resolve_fill_ratio: f64,
     /// Run re-solves on a background thread; else inline, blocking.

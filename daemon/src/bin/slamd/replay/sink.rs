@@ -324,11 +324,17 @@ impl<P: ReplayPose> Sink<P> for DaemonSink<P> {
         // it is quiet (the first re-solved one may predate the last edges'
         // polish), for as long as the daemon shows it is alive
         let mut ready = Instant::now();
+        // (another frontend may keep it publishing: stop taking snapshots
+        // after a while)
+        let deadline = ready + self.timeout.max(Duration::from_secs(30));
         loop {
             if let Some(s) = self.snapshots.wait(QUIET)? {
                 self.latest = Some(s);
                 (ready, self.heard) = (Instant::now(), Instant::now());
-                continue;
+                if ready < deadline {
+                    continue;
+                }
+                break;
             }
             let pending = self.latest.as_ref().map_or(0, |s| s.header().pending);
             if pending == 0 {
