@@ -1,4 +1,5 @@
-//! Writing results: g2o (vertices plus the graph's edges) and `id x y θ`.
+//! Writing results: g2o (vertices plus the graph's edges) and pose tables
+//! (`id x y θ`; in space `id x y z qx qy qz qw`).
 
 use crate::geometry::Pose2;
 use crate::graph::{Edge, KeyframeId, Pose3, PoseGraph, RigidMotion};
@@ -76,10 +77,24 @@ pub fn write_g2o<P: G2oPose>(out: &mut impl Write, graph: &PoseGraph<P>, poses: 
     Ok(())
 }
 
-/// Writes one `id x y θ` line per keyframe.
-pub fn write_pose_table(out: &mut impl Write, graph: &PoseGraph, poses: &[Pose2]) -> std::io::Result<()> {
+/// Writes one line per keyframe: its id and the pose's
+/// [`RigidMotion::PARAMS`] numbers (`id x y θ`; in space
+/// `id x y z qx qy qz qw`, `qw ≥ 0`), what
+/// [`read_pose_table`](super::read_pose_table) reads.
+pub fn write_pose_table<P: RigidMotion>(
+    out: &mut impl Write,
+    graph: &PoseGraph<P>,
+    poses: &[P],
+) -> std::io::Result<()> {
+    let mut params = [0.0; 7];
+    let params = &mut params[..P::PARAMS];
     for (k, p) in graph.keyframes().iter().zip(poses) {
-        writeln!(out, "{} {} {} {}", k.id, p.x, p.y, p.theta)?;
+        p.write_params(params);
+        write!(out, "{}", k.id)?;
+        for v in params.iter() {
+            write!(out, " {v}")?;
+        }
+        writeln!(out)?;
     }
     Ok(())
 }
@@ -98,5 +113,35 @@ mod tests {
         let mut out = Vec::new();
         write_g2o(&mut out, &g, &poses).unwrap();
         assert_eq!(String::from_utf8(out).unwrap(), text);
+    }
+
+    #[test]
+    fn pose_tables_round_trip_in_both_dimensions() {
+        let text = "VERTEX_SE2 3 1 0.5 0.25\nVERTEX_SE2 7 -2 4 -3\n";
+        let g = parse_graph(Path::new("a.g2o"), text, Format::G2o).unwrap();
+        let poses: Vec<Pose2> = g.keyframes().iter().map(|k| k.guess.unwrap()).collect();
+        let mut out = Vec::new();
+        write_pose_table(&mut out, &g, &poses).unwrap();
+        let table = String::from_utf8(out).unwrap();
+        assert_eq!(table, "3 1 0.5 0.25\n7 -2 4 -3\n");
+
+        let mut g3 = PoseGraph::<Pose3>::default();
+        g3.add_keyframe(4, None).unwrap();
+        // w < 0: the table writes the same rotation with w ≥ 0
+        let q = nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(-0.8, 0.0, 0.6, 0.0));
+        let pose = Pose3::new(nalgebra::Vector3::new(1.0, 2.0, 3.0), q);
+        let mut out = Vec::new();
+        write_pose_table(&mut out, &g3, &[pose]).unwrap();
+        let table = String::from_utf8(out).unwrap();
+        let numbers: Vec<f64> = table.split_whitespace().map(|t| t.parse().unwrap()).collect();
+        assert_eq!(numbers[..5], [4.0, 1.0, 2.0, 3.0, 0.0]);
+        assert!(
+            (numbers[5] + 0.6).abs() < 1e-15 && (numbers[7] - 0.8).abs() < 1e-15,
+            "{table}"
+        );
+        let back = crate::io::poses::parse_pose_table::<Pose3>(Path::new("t.txt"), &table).unwrap();
+        assert!(
+            back[&4].rotation.angle_to(&pose.rotation) < 1e-15 && back[&4].translation == pose.translation
+        );
     }
 }

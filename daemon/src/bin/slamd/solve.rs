@@ -266,10 +266,12 @@ pub fn print_result<P: LiePose>(sol: &BatchSolution<P>, robust: &Rejected, ate: 
     }
 }
 
-pub fn write_result(
+/// Writes `poses` to `out` by its extension: a trajectory (`.tum`,
+/// `.kitti`), g2o (`.g2o`), else a pose table.
+pub fn write_result<P: io::G2oPose>(
     out: &std::path::Path,
-    graph: &PoseGraph,
-    poses: &[slamd::geometry::Pose2],
+    graph: &PoseGraph<P>,
+    poses: &[P],
 ) -> anyhow::Result<()> {
     let file = std::fs::File::create(out).with_context(|| format!("creating {}", out.display()))?;
     let mut w = std::io::BufWriter::new(file);
@@ -328,18 +330,7 @@ fn run_spatial(opts: &SolveOpts, graph: &PoseGraph<Pose3>, skipped: serde_json::
     let sol = solve_batch(graph, &options).with_context(|| format!("solving {}", opts.file.display()))?;
     let ate = truth.as_ref().and_then(|t| ate(graph, &sol.poses, t));
     if let Some(out) = &opts.out {
-        let file = std::fs::File::create(out).with_context(|| format!("creating {}", out.display()))?;
-        let mut w = std::io::BufWriter::new(file);
-        if let Some(layout) = io::Trajectory::of(out) {
-            io::write_trajectory(&mut w, layout, &keyframe_ids(graph), &sol.poses)?;
-        } else if out.extension().is_some_and(|e| e == "g2o") {
-            io::write_g2o(&mut w, graph, &sol.poses)?;
-        } else {
-            for (k, p) in graph.keyframes().iter().zip(&sol.poses) {
-                let v = p.to_xyz_quaternion().map(|x| x.to_string()).join(" ");
-                std::io::Write::write_all(&mut w, format!("{} {v}\n", k.id).as_bytes())?;
-            }
-        }
+        write_result(out, graph, &sol.poses)?;
     }
     let covariance_seconds = opts
         .covariances

@@ -27,13 +27,7 @@ pub fn run(
     let mut sink = super::sink::<Pose3>(opts, config)?;
     let out = replay(&graph, &[], sink.as_mut(), &checkpoints, false, |_| {})?;
     if let Some(path) = &opts.out {
-        let mut w = std::io::BufWriter::new(std::fs::File::create(path)?);
-        match io::Trajectory::of(path) {
-            Some(layout) => {
-                io::write_trajectory(&mut w, layout, &crate::solve::keyframe_ids(&graph), &out.poses)?
-            }
-            None => io::write_g2o(&mut w, &graph, &out.poses)?,
-        }
+        crate::solve::write_result(path, &graph, &out.poses)?;
     }
     let mode = sink.mode();
     let report = super::report(&graph, out, sink.as_ref(), truth.as_ref())?;
