@@ -58,7 +58,7 @@ fn percentiles(mut v: Vec<f64>) -> (f64, f64, f64) {
 fn iceoryx2(session: usize, cpu: Option<usize>) -> Vec<f64> {
     let config = quiet_config(format!("slamd-bench-rt-{}-{session}", std::process::id()), cpu);
     let server = Server::spawn(config.clone()).expect("daemon");
-    let snaps = Snapshots::open(&config.namespace).expect("snapshots");
+    let mut snaps = Snapshots::open(&config.namespace).expect("snapshots");
     let mut f = Frontend::connect(&config).expect("frontend");
     Frontend::add_keyframe(&mut f, 0, 0, None).unwrap();
     let mut out = Vec::with_capacity(PER_SESSION);

@@ -11,7 +11,9 @@ streams it (with --daemon: into `slamd run --state DIR` on a namespace of
 its own instead). Each replay runs under `/usr/bin/time -v` for its peak
 RSS (with --daemon, the daemon's). Prints one table: total time and its
 ratio to linear growth from the first size, p50 / p99 / max wait per
-keyframe, final χ² against the optimum, peak RSS and RSS per keyframe.
+keyframe, final χ² against the optimum, peak RSS and RSS per keyframe;
+with --daemon also the pose bytes an average snapshot carried and how many
+of the snapshots went out whole (the daemon's closing log line).
 The binary is target/release/slamd or $SLAMD_BIN.
 """
 import argparse, json, os, re, signal, subprocess, sys, tempfile, time
@@ -45,7 +47,8 @@ def through_daemon(world, tmp, n):
     # to the group, the daemon in it
     daemon = subprocess.Popen(["/usr/bin/time", "-v", BIN, "run", "--namespace", ns, "--state", state],
                               stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
-                              env={**os.environ, "SLAMD_LOG": "error"}, start_new_session=True)
+                              env={**os.environ, "SLAMD_LOG": "error,slamd::ipc::engine_loop=info"},
+                              start_new_session=True)
     deadline = time.monotonic() + 30
     while subprocess.run([BIN, "status", "--namespace", ns], capture_output=True).returncode != 0:
         if time.monotonic() > deadline:
@@ -58,7 +61,12 @@ def through_daemon(world, tmp, n):
     _, err = daemon.communicate(timeout=600)
     if out.returncode != 0:
         sys.exit(f"replay of {world} failed: {out.stderr.strip()}")
-    return last_json(out.stdout), peak_rss(err)
+    r = last_json(out.stdout)
+    published = re.search(r"snapshots=(\d+) whole=(\d+) poses=\d+ bytes_per_snapshot=(\d+)",
+                          re.sub(r"\x1b\[[0-9;]*m", "", err))
+    if published:
+        r["snapshots"], r["whole"], r["bytes_per_snapshot"] = map(int, published.groups())
+    return r, peak_rss(err)
 
 
 def main():
@@ -82,12 +90,18 @@ def main():
             r = last_json(out)
         rows.append((n, r, best, rss))
     n0, r0 = rows[0][0], rows[0][1]
-    print(f"| keyframes | total s | × linear from {n0:,} | p50 µs | p99 ms | max ms | χ² / optimum | peak RSS MiB | KiB per keyframe |")
-    print("|---|---|---|---|---|---|---|---|---|")
+    extra = " bytes per snapshot | whole snapshots |" if args.daemon else ""
+    print(f"| keyframes | total s | × linear from {n0:,} | p50 µs | p99 ms | max ms | χ² / optimum | "
+          f"peak RSS MiB | KiB per keyframe |{extra}")
+    print("|---|---|---|---|---|---|---|---|---|" + ("---|---|" if args.daemon else ""))
     for n, r, best, rss in rows:
         linear = r["total_s"] / (r0["total_s"] * n / n0)
-        print(f"| {n:,} | {r['total_s']:.1f} | {linear:.2f} | {r['p50_us']:.0f} | {r['p99_us'] / 1e3:.1f} | "
-              f"{r['max_us'] / 1e3:.0f} | {r['chi2'] / best:.4f} | {rss:.0f} | {rss * 1024 / n:.1f} |")
+        row = (f"| {n:,} | {r['total_s']:.1f} | {linear:.2f} | {r['p50_us']:.0f} | {r['p99_us'] / 1e3:.1f} | "
+               f"{r['max_us'] / 1e3:.0f} | {r['chi2'] / best:.4f} | {rss:.0f} | {rss * 1024 / n:.1f} |")
+        if args.daemon:
+            row += (f" {r.get('bytes_per_snapshot', float('nan')):,} | "
+                    f"{r.get('whole', 0):,} of {r.get('snapshots', 0):,} |")
+        print(row)
     how = "`slamd replay` into `slamd run --state`" if args.daemon else "`slamd replay --embedded`"
     print(f"\n- {how}, synth seed {args.seed}; one run each")
 

@@ -2,8 +2,8 @@
 //! shared memory.
 
 use slamd_client::{
-    Config, EdgeInput, EdgeKind, Embedded, EngineConfig, Frontend, Information, Pose2, Publish,
-    RejectionReason, SnapshotSample, Snapshots,
+    Config, EdgeInput, EdgeKind, Embedded, EngineConfig, Frontend, Information, MapSnapshot, Pose2, Publish,
+    RejectionReason, Snapshots,
 };
 use slamd_protocol::codec::{edge_out, Origin};
 use slamd_protocol::{Edge, PROTOCOL_VERSION};
@@ -82,7 +82,7 @@ impl Drop for Daemon {
 /// Waits for a snapshot acknowledging `seq` from `frontend`; returns its
 /// poses by id and its header.
 fn wait_for_ack(
-    s: &Snapshots,
+    s: &mut Snapshots,
     frontend: u32,
     seq: u64,
 ) -> (HashMap<u64, Pose2>, slamd_protocol::SnapshotHeader) {
@@ -96,12 +96,12 @@ fn wait_for_ack(
 }
 
 /// Waits for a snapshot acknowledging `seq` from `frontend`.
-fn wait_for_sample(s: &Snapshots, frontend: u32, seq: u64) -> SnapshotSample {
+fn wait_for_sample(s: &mut Snapshots, frontend: u32, seq: u64) -> MapSnapshot {
     let deadline = Instant::now() + Duration::from_secs(20);
     loop {
         if let Some(snap) = s.wait(Duration::from_millis(200)).expect("snapshot link") {
             if snap.header().ack_of(frontend).is_some_and(|a| a >= seq) {
-                return snap;
+                return snap.clone();
             }
         }
         assert!(
@@ -147,7 +147,7 @@ fn two_frontends_interleave_edges() {
     let truth = walk(40);
     let mut odometry = Frontend::connect(&daemon.config()).unwrap();
     let mut closures = Frontend::connect(&daemon.config()).unwrap();
-    let snaps = Snapshots::open(&daemon.namespace).unwrap();
+    let mut snaps = Snapshots::open(&daemon.namespace).unwrap();
     let mut loops = 0;
     for k in 0..truth.len() {
         odometry.add_keyframe(k as u64, 0, None).unwrap();
@@ -166,8 +166,8 @@ fn two_frontends_interleave_edges() {
             loops += 1;
         }
     }
-    let _ = wait_for_ack(&snaps, closures.id(), closures.last_sequence());
-    let (poses, header) = wait_for_ack(&snaps, odometry.id(), odometry.last_sequence());
+    let _ = wait_for_ack(&mut snaps, closures.id(), closures.last_sequence());
+    let (poses, header) = wait_for_ack(&mut snaps, odometry.id(), odometry.last_sequence());
     assert_eq!(
         (header.keyframes, header.edges, header.rejected),
         (40, 39 + loops, 0)
@@ -175,13 +175,16 @@ fn two_frontends_interleave_edges() {
     close(&poses, &truth, 1e-6);
     assert!(header.chi2 < 1e-9, "{}", header.chi2);
     assert!(snaps.rejections().unwrap().is_empty());
+    // the snapshot of fresh input says the daemon still works on it; the
+    // last one, once it rests, says the map is settled
+    assert_eq!(header.settling, 1);
     // once the daemon is at rest (no snapshot for a second), a subscriber
     // that comes then and waits gets the latest snapshot within a tick
     let mut newest = header.version;
     while let Some(s) = snaps.wait(Duration::from_secs(1)).unwrap() {
         newest = s.header().version;
     }
-    let late = Snapshots::open(&daemon.namespace).unwrap();
+    let mut late = Snapshots::open(&daemon.namespace).unwrap();
     let start = Instant::now();
     let got = late
         .wait(Duration::from_secs(5))
@@ -190,6 +193,8 @@ fn two_frontends_interleave_edges() {
     assert!(start.elapsed() < Duration::from_secs(2), "{:?}", start.elapsed());
     assert_eq!(got.header().version, newest);
     assert_eq!((got.header().keyframes, got.header().edges), (40, 39 + loops));
+    assert_eq!((got.header().settling, got.header().pending), (0, 0));
+    assert_eq!(got.poses().len(), 40);
     assert!(daemon.stop().success());
 }
 
@@ -209,7 +214,7 @@ fn hostile_stream_gets_clean_rejections_while_valid_data_flows() {
     );
     let truth = walk(12);
     let mut f = Frontend::connect(&daemon.config()).unwrap();
-    let snaps = Snapshots::open(&daemon.namespace).unwrap();
+    let mut snaps = Snapshots::open(&daemon.namespace).unwrap();
     let mut expected: Vec<(RejectionReason, u64)> = Vec::new();
     let good = |k: usize| exact(&truth, k - 1, k, EdgeKind::Odometry);
     // a loop closure as the codec encodes it; the frontend numbers it
@@ -286,7 +291,7 @@ fn hostile_stream_gets_clean_rejections_while_valid_data_flows() {
         }
         f.flush().unwrap();
     }
-    let (poses, header) = wait_for_ack(&snaps, f.id(), f.last_sequence());
+    let (poses, header) = wait_for_ack(&mut snaps, f.id(), f.last_sequence());
     close(&poses, &truth, 1e-6);
     // the held edge to keyframe 999 is rejected once its wait runs out
     let deadline = Instant::now() + Duration::from_secs(10);
@@ -312,7 +317,7 @@ fn hostile_stream_gets_clean_rejections_while_valid_data_flows() {
         ))
         .unwrap();
     f.flush().unwrap();
-    let (poses, header) = wait_for_ack(&snaps, f.id(), seq);
+    let (poses, header) = wait_for_ack(&mut snaps, f.id(), seq);
     assert_eq!(poses.len(), 13);
     assert_eq!(header.rejected, 9);
     assert!(daemon.stop().success());
@@ -350,7 +355,7 @@ fn a_killed_frontend_is_survived_and_a_new_one_continues() {
         .stderr(Stdio::null())
         .spawn()
         .unwrap();
-    let snaps = Snapshots::open(&daemon.namespace).unwrap();
+    let mut snaps = Snapshots::open(&daemon.namespace).unwrap();
     // let it get some way, then kill it without a chance to clean up
     let deadline = Instant::now() + Duration::from_secs(20);
     loop {
@@ -363,16 +368,9 @@ fn a_killed_frontend_is_survived_and_a_new_one_continues() {
     replayer.kill().unwrap();
     replayer.wait().unwrap();
     std::thread::sleep(Duration::from_millis(300));
-    let latest = snaps
-        .wait(Duration::from_secs(1))
-        .unwrap()
-        .or(snaps.latest().unwrap());
-    let last = latest
-        .map(|s| s.poses().iter().map(|p| p.id).max().unwrap())
-        .unwrap_or_else(|| {
-            let s = snaps.wait(Duration::from_secs(5)).unwrap().expect("a snapshot");
-            s.poses().iter().map(|p| p.id).max().unwrap()
-        });
+    let _ = snaps.wait(Duration::from_secs(1)).unwrap();
+    let latest = snaps.current().expect("a snapshot");
+    let last = latest.poses().iter().map(|p| p.id).max().unwrap();
     // a new frontend continues the map from the last keyframe
     let mut f = Frontend::connect(&daemon.config()).unwrap();
     let mut seq = 0;
@@ -389,7 +387,7 @@ fn a_killed_frontend_is_survived_and_a_new_one_continues() {
             .unwrap();
         f.flush().unwrap();
     }
-    let (poses, header) = wait_for_ack(&snaps, f.id(), seq);
+    let (poses, header) = wait_for_ack(&mut snaps, f.id(), seq);
     assert!(poses.contains_key(&(last + 19)), "new keyframes missing");
     assert_eq!(header.rejected, 0);
     assert!(daemon.stop().success());
@@ -406,7 +404,7 @@ fn daemon_snapshots_equal_the_embedded_engine() {
     let graph = read("intel_sesync.g2o").prefix(400);
     let groups = graph.by_newer();
     let mut f = Frontend::connect(&daemon.config()).unwrap();
-    let snaps = Snapshots::open(&daemon.namespace).unwrap();
+    let mut snaps = Snapshots::open(&daemon.namespace).unwrap();
     let config = Config {
         engine: EngineConfig {
             background: false,
@@ -428,7 +426,7 @@ fn daemon_snapshots_equal_the_embedded_engine() {
             side.flush().unwrap();
         }
         // lockstep: one batch, one update per keyframe on both sides
-        last = Some(wait_for_sample(&snaps, f.id(), f.last_sequence()));
+        last = Some(wait_for_sample(&mut snaps, f.id(), f.last_sequence()));
     }
     let last = last.expect("a snapshot");
     let snap = embedded.snapshot();
@@ -548,7 +546,7 @@ fn status_shows_a_running_daemon() {
     let _ = std::fs::remove_dir_all(&dir);
     let daemon = Daemon::start("status", &[("SLAMD_STATE__DIR", dir.to_str().unwrap())]);
     let config = daemon.config();
-    let snapshots = Snapshots::open(&config.namespace).unwrap();
+    let mut snapshots = Snapshots::open(&config.namespace).unwrap();
     let mut f = Frontend::connect(&config).unwrap();
     let truth = walk(3);
     for k in 0..3 {
@@ -557,7 +555,7 @@ fn status_shows_a_running_daemon() {
     f.add_edge(&exact(&truth, 0, 1, EdgeKind::Odometry)).unwrap();
     let last = f.add_edge(&exact(&truth, 1, 2, EdgeKind::Odometry)).unwrap();
     f.flush().unwrap();
-    wait_for_ack(&snapshots, f.id(), last);
+    wait_for_ack(&mut snapshots, f.id(), last);
     let v = slamd_tests::run_json(&["status", "--namespace", &daemon.namespace, "--json"]);
     assert_eq!(v["keyframes"], 3);
     assert_eq!(v["edges"], 2);

@@ -102,7 +102,7 @@ fn a_daemon_continues_a_saved_map_to_the_optimum() {
         ..slamd::config::Config::default()
     };
     let server = Server::spawn_map(config.clone(), Some(map)).expect("daemon");
-    let snapshots = Snapshots::open(&config.namespace).unwrap();
+    let mut snapshots = Snapshots::open(&config.namespace).unwrap();
     let mut f = Frontend::connect(&config).unwrap();
     for (k, group) in groups.iter().enumerate().skip(1750) {
         f.add_keyframe(g.id_of(k), 0, None).unwrap();

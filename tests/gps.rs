@@ -235,7 +235,7 @@ fn the_daemon_holds_early_fixes_rejects_bad_ones_and_publishes_enu() {
     let daemon = Daemon::start("gps", &[("SLAMD_GPS__ORIGIN", ORIGIN)]);
     let (truth, pairs) = lanes(60);
     let mut f = Frontend::connect(&daemon.config()).unwrap();
-    let snaps = Snapshots::open(&daemon.namespace).unwrap();
+    let mut snaps = Snapshots::open(&daemon.namespace).unwrap();
     // fixes overtake their keyframes: the daemon holds them
     for k in (3..60).step_by(9) {
         Publish::add_gps(&mut f, &fix(k, &truth)).unwrap();

@@ -127,7 +127,7 @@ fn a_3d_daemon_georeferences_with_heights() {
             ("SLAMD_GPS__ORIGIN", "45.4781,9.2271,120"),
         ],
     );
-    let snaps = Snapshots::open(&daemon.namespace).unwrap();
+    let mut snaps = Snapshots::open(&daemon.namespace).unwrap();
     let mut f = Frontend::connect(&daemon.config()).unwrap();
     let mut seq = 0;
     for k in 0..truth.len() {

@@ -169,7 +169,7 @@ fn the_daemon_publishes_each_loop_closures_switch() {
     use std::time::{Duration, Instant};
     let daemon = Daemon::start("switches", &[]);
     let mut f = Frontend::connect(&daemon.config()).unwrap();
-    let snaps = Snapshots::open(&daemon.namespace).unwrap();
+    let mut snaps = Snapshots::open(&daemon.namespace).unwrap();
     // a corridor walked twice: every second keyframe of the return closes a loop
     let n = 40;
     let truth: Vec<Pose2> = (0..n)

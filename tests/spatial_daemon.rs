@@ -14,7 +14,7 @@ use std::time::{Duration, Instant};
 /// Waits for a snapshot that acknowledges `seq` of `frontend` and
 /// satisfies `done`; returns its poses (indexed by id) and header.
 fn wait_until(
-    s: &Snapshots,
+    s: &mut Snapshots,
     frontend: u32,
     seq: u64,
     done: impl Fn(&[Option<Pose3>], &SnapshotHeader) -> bool,
@@ -72,7 +72,7 @@ fn a_building_streams_through_a_3d_daemon_and_survives_a_restart() {
     let args = ["--state", dir_arg.as_str()];
     let env = [("SLAMD_DIMENSION", "3")];
     let daemon = Daemon::serve(&namespace, &args, &env);
-    let snaps = Snapshots::open(&namespace).unwrap();
+    let mut snaps = Snapshots::open(&namespace).unwrap();
     let mut f = Frontend::connect(&daemon.config()).unwrap();
     // as a frontend that waits for each keyframe's snapshot: one keyframe
     // per batch, whatever the machine's load (a burst arrives in batches
@@ -85,7 +85,7 @@ fn a_building_streams_through_a_3d_daemon_and_survives_a_restart() {
             seq = f.add_edge(&g.edge_input(e)).unwrap();
         }
         f.flush().unwrap();
-        wait_until(&snaps, f.id(), seq, |_, _| true);
+        wait_until(&mut snaps, f.id(), seq, |_, _| true);
     }
     // at rest the daemon re-solves in the background to the optimum of
     // every edge (the header's χ² leaves out what the filter holds off)
@@ -102,7 +102,7 @@ fn a_building_streams_through_a_3d_daemon_and_survives_a_restart() {
             })
         })
     };
-    let (poses, header) = wait_until(&snaps, f.id(), seq, |p, h| {
+    let (poses, header) = wait_until(&mut snaps, f.id(), seq, |p, h| {
         h.keyframes == n as u64 && chi2_all(p) <= 1.001 * best.chi2 && at_optimum(p)
     });
     assert_eq!((header.dimension, header.poses), (3, n as u64));
@@ -137,7 +137,7 @@ fn a_building_streams_through_a_3d_daemon_and_survives_a_restart() {
         rejection.text(),
         "keyframe 9999 is 2-D; this daemon serves 3-D graphs (its `dimension` setting)"
     );
-    let (_, after) = wait_until(&snaps, planar.id(), wrong, |_, _| true);
+    let (_, after) = wait_until(&mut snaps, planar.id(), wrong, |_, _| true);
     assert_eq!((after.keyframes, after.rejected), (n as u64, 1));
     let chi2 = after.chi2;
     let id = f.id();
@@ -146,9 +146,9 @@ fn a_building_streams_through_a_3d_daemon_and_survives_a_restart() {
 
     // a new start on the same directory publishes the same map
     let daemon = Daemon::serve(&namespace, &args, &env);
-    let snaps = Snapshots::open(&namespace).unwrap();
+    let mut snaps = Snapshots::open(&namespace).unwrap();
     // (it acknowledges what the last start had taken)
-    let (restored, h) = wait_until(&snaps, id, seq, |_, h| h.keyframes == n as u64);
+    let (restored, h) = wait_until(&mut snaps, id, seq, |_, h| h.keyframes == n as u64);
     assert_eq!(
         (h.dimension, h.poses, h.edges),
         (3, n as u64, g.edges().len() as u64)

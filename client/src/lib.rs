@@ -27,7 +27,7 @@
 //! let config = Config { namespace: format!("doc-client-{}", std::process::id()), ..Config::default() };
 //! let server = Server::spawn(config.clone()).unwrap();
 //!
-//! let snapshots = Snapshots::open(&config.namespace).unwrap();
+//! let mut snapshots = Snapshots::open(&config.namespace).unwrap();
 //! let mut frontend = Frontend::connect(&config).unwrap();
 //! frontend.add_keyframe(0, 0, None).unwrap();
 //! frontend.add_keyframe(1, 0, None).unwrap();
@@ -68,11 +68,10 @@ pub use slamd::engine::{EngineConfig, Snapshot};
 pub use slamd::gps::GpsConfig;
 #[cfg(feature = "embedded")]
 pub use slamd::ipc::Server;
-pub use slamd_protocol::transport::{
-    SnapshotLink as Snapshots, SnapshotSample, SwitchesSample, TransportError,
-};
+pub use slamd_protocol::transport::{SnapshotLink as Snapshots, SwitchesSample, TransportError};
 pub use slamd_protocol::{
-    Endpoint, Frontend, Pose, Rejection, RejectionReason, SnapshotHeader, Switch, SwitchesHeader, Waiting,
+    Endpoint, Frontend, MapSnapshot, Pose, Rejection, RejectionReason, SnapshotHeader, Switch,
+    SwitchesHeader, Waiting,
 };
 pub use slamd_types::{
     EdgeInput, EdgeKind, FixInput, Geodetic, Information, Information6, KeyframeId, Pose2, Pose3,

@@ -20,6 +20,8 @@
 //! edge_buffer = 4096
 //! gps_buffer = 1024
 //! initial_poses = 16384        # snapshot size reserved at start (it grows)
+//! max_changes = 256            # a snapshot that changed more poses goes out whole
+//! change_buffer = 32           # changes a subscriber's queue holds
 //! backpressure_ms = 200        # a frontend's send waits this long on a full queue
 //! tick_ms = 250                # dead-node cleanup and idle work
 //! reconnect_s = 30.0           # a frontend waits this long for a restarted daemon
@@ -28,6 +30,7 @@
 //! [snapshot]
 //! max_rate_hz = 0.0            # 0: one snapshot per processed batch
 //! covariance = true            # the newest keyframe's covariance in each header
+//! whole_every_ms = 1000        # the whole map at least this often (late subscribers)
 //!
 //! [gps]                        # see slamd::gps::GpsConfig
 //! # origin = "45.5138,9.2110"  # ENU origin LAT,LON[,HEIGHT]; default: the first fix
@@ -98,6 +101,14 @@ pub struct IpcConfig {
     pub gps_buffer: usize,
     /// Poses the snapshot publisher reserves at start.
     pub initial_poses: usize,
+    /// Changed poses one snapshot carries at most; one that changed more
+    /// goes out whole. Every subscriber's queue of changes costs
+    /// `change_buffer` × this × 112 bytes of shared memory.
+    pub max_changes: usize,
+    /// Snapshots' changes a subscriber's queue holds (and a late
+    /// subscriber catches up from): a reader that falls further behind
+    /// waits for the next whole map.
+    pub change_buffer: usize,
     /// How long a frontend's send retries on a full queue before failing.
     pub backpressure_ms: u64,
     /// Period of dead-node cleanup and idle work.
@@ -121,6 +132,8 @@ impl Default for IpcConfig {
             edge_buffer: q.edge_buffer,
             gps_buffer: q.gps_buffer,
             initial_poses: q.initial_poses,
+            max_changes: q.max_changes,
+            change_buffer: q.change_buffer,
             backpressure_ms: 200,
             tick_ms: 250,
             reconnect_s: 30.0,
@@ -138,6 +151,12 @@ pub struct SnapshotConfig {
     /// Whether each snapshot's header carries the marginal covariance of
     /// its newest keyframe ([`Engine::marginal`](crate::engine::Engine::marginal)).
     pub covariance: bool,
+    /// The whole map goes out at least this often (ms), besides whenever
+    /// more than `ipc.max_changes` poses changed: a late subscriber, or one
+    /// whose queue of changes overflowed, waits at most this long for a
+    /// map. Every whole map costs the map's size; the snapshots between
+    /// cost what changed.
+    pub whole_every_ms: u64,
 }
 
 impl Default for SnapshotConfig {
@@ -145,6 +164,7 @@ impl Default for SnapshotConfig {
         Self {
             max_rate_hz: 0.0,
             covariance: true,
+            whole_every_ms: 1000,
         }
     }
 }
@@ -264,6 +284,8 @@ impl Config {
             ("ipc.edge_buffer", i.edge_buffer),
             ("ipc.gps_buffer", i.gps_buffer),
             ("ipc.initial_poses", i.initial_poses),
+            ("ipc.max_changes", i.max_changes),
+            ("ipc.change_buffer", i.change_buffer),
         ] {
             if v == 0 {
                 return bad(format!("{name} must be at least 1"));
@@ -318,6 +340,8 @@ impl Config {
             edge_buffer: i.edge_buffer,
             gps_buffer: i.gps_buffer,
             initial_poses: i.initial_poses,
+            max_changes: i.max_changes,
+            change_buffer: i.change_buffer,
             ..Qos::default()
         }
     }

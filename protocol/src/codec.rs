@@ -407,7 +407,7 @@ mod tests {
             (
                 |e| e.protocol = 99,
                 RejectionReason::ProtocolVersion,
-                "message speaks protocol 99, the daemon 5",
+                "message speaks protocol 99, the daemon 6",
             ),
             (
                 |e| e.dimension = 3,

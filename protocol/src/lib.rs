@@ -2,12 +2,15 @@
 //!
 //! Frontends publish [`Keyframe`]s, [`Edge`]s and [`GpsFix`]es, then poke
 //! the daemon with an event; the daemon publishes a [`SnapshotHeader`] plus
-//! a slice of [`Pose`]s after each batch, a [`Rejection`] for every
+//! the [`Pose`]s that changed after each batch (and the whole map now and
+//! then, [`MapSnapshot`]), a [`Rejection`] for every
 //! message it refuses, and the outlier filter's [`Switch`] of every loop
 //! closure when they change. All names live under one namespace ([`ServiceNames`]).
 //!
 //! - [`message`]: the `#[repr(C)]` types, identical in every process.
 //! - [`service`]: service names and QoS numbers, in one place.
+//! - [`snapshot`]: a subscriber's copy of the map, built from whole maps
+//!   and the changes between them.
 //! - [`codec`]: slamd's input types ([`slamd_types`]) to messages and
 //!   back, every inbound field checked into a typed [`Rejection`].
 //! - [`Frontend`]: what a frontend publishes with: numbered keyframes,
@@ -28,6 +31,7 @@ pub mod codec;
 mod frontend;
 pub mod message;
 pub mod service;
+pub mod snapshot;
 pub mod transport;
 
 pub use frontend::{Endpoint, Frontend, Waiting, SAY_EVERY};
@@ -37,3 +41,4 @@ pub use message::{
     PROTOCOL_VERSION, REJECTED_BELOW,
 };
 pub use service::ServiceNames;
+pub use snapshot::MapSnapshot;

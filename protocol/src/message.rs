@@ -11,7 +11,7 @@
 use iceoryx2::prelude::*;
 
 /// The layout version of every message below. Bump it on any change.
-pub const PROTOCOL_VERSION: u32 = 5;
+pub const PROTOCOL_VERSION: u32 = 6;
 
 /// Numbers that write a pose in [`Keyframe::guess`] and [`Edge::measurement`]:
 /// the first 3 in the plane, all 7 in space.
@@ -327,7 +327,11 @@ impl DaemonStatus {
     }
 }
 
-/// The header of a pose snapshot; the payload is `poses` [`Pose`]s.
+/// The header of a pose snapshot; the payload is `poses` [`Pose`]s. On
+/// `{ns}/poses` the payload is the whole map (`whole` 1); on `{ns}/changes`
+/// it is the poses that changed since version `base` (new keyframes
+/// included), or nothing with `whole` 1 when this version's map went out
+/// whole on `{ns}/poses` instead.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
 #[type_name("slamd::SnapshotHeader")]
@@ -382,6 +386,20 @@ pub struct SnapshotHeader {
     /// the plane, all 21 over `(x, y, z, rx, ry, rz)` in space (m, rad;
     /// the rotation as a rotation vector). Relative to the gauge keyframe.
     pub covariance: [f64; INFORMATION_UPPER],
+    /// On `{ns}/changes`: the version whose map these poses change (the
+    /// previous one published). 0 on `{ns}/poses`.
+    pub base: u64,
+    /// The daemon start that published it, as [`DaemonStatus::instance`]:
+    /// versions count again after a restart.
+    pub instance: u64,
+    /// 1 when this version's map is whole: the payload on `{ns}/poses`; on
+    /// `{ns}/changes`, a sample without poses saying to read it there.
+    pub whole: u32,
+    /// 1 while the daemon still works on the input so far (input came
+    /// within a tick, a re-solve runs, the outlier filter has not caught
+    /// up); 0 on the settled map, which the daemon publishes once that
+    /// work is done: the final map of a stream.
+    pub settling: u32,
 }
 
 impl SnapshotHeader {
@@ -559,8 +577,8 @@ mod tests {
         assert_eq!(std::mem::size_of::<Edge>(), 264);
         assert_eq!(std::mem::size_of::<GpsFix>(), 96);
         assert_eq!(std::mem::size_of::<Pose>(), 112);
-        assert_eq!(std::mem::size_of::<SnapshotHeader>(), 432);
-        assert_eq!(std::mem::size_of::<DaemonStatus>(), 624);
+        assert_eq!(std::mem::size_of::<SnapshotHeader>(), 456);
+        assert_eq!(std::mem::size_of::<DaemonStatus>(), 648);
         assert_eq!(std::mem::size_of::<Switch>(), 40);
         assert_eq!(std::mem::size_of::<SwitchesHeader>(), 32);
         assert_eq!(std::mem::size_of::<Rejection>(), 160);
@@ -570,7 +588,9 @@ mod tests {
         assert_eq!(std::mem::offset_of!(SnapshotHeader, covariance_keyframe), 256);
         assert_eq!(std::mem::offset_of!(SnapshotHeader, covariance), 264);
         assert_eq!(std::mem::offset_of!(DaemonStatus, snapshot), 64);
-        assert_eq!(std::mem::offset_of!(DaemonStatus, acks), 496);
+        assert_eq!(std::mem::offset_of!(SnapshotHeader, base), 432);
+        assert_eq!(std::mem::offset_of!(SnapshotHeader, whole), 448);
+        assert_eq!(std::mem::offset_of!(DaemonStatus, acks), 520);
         assert_eq!(std::mem::align_of::<SnapshotHeader>(), 8);
     }
 }

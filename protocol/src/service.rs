@@ -8,7 +8,7 @@ pub const PROTOCOL_KEY: &str = "slamd.protocol";
 pub const DEFAULT_NAMESPACE: &str = "slamd";
 
 /// The services of one namespace: `{ns}/keyframes`, `{ns}/edges`,
-/// `{ns}/gps`, `{ns}/poses`, `{ns}/rejections`, `{ns}/switches`,
+/// `{ns}/gps`, `{ns}/poses`, `{ns}/changes`, `{ns}/rejections`, `{ns}/switches`,
 /// `{ns}/status`, and the events `{ns}/ingest`
 /// (frontends → daemon) and `{ns}/published` (daemon → subscribers).
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -19,8 +19,10 @@ pub struct ServiceNames {
     pub edges: String,
     /// GPS fixes, frontends → daemon.
     pub gps: String,
-    /// Pose snapshots, daemon → subscribers.
+    /// Whole pose snapshots, daemon → subscribers.
     pub poses: String,
+    /// What each snapshot changed, daemon → subscribers.
+    pub changes: String,
     /// Rejections, daemon → frontends.
     pub rejections: String,
     /// Loop-closure switches, daemon → subscribers.
@@ -43,6 +45,7 @@ impl ServiceNames {
             edges: n("edges"),
             gps: n("gps"),
             poses: n("poses"),
+            changes: n("changes"),
             rejections: n("rejections"),
             switches: n("switches"),
             status: n("status"),
@@ -68,6 +71,12 @@ pub struct Qos {
     pub gps_buffer: usize,
     /// Poses the snapshot publisher reserves at start (grows by powers of 2).
     pub initial_poses: usize,
+    /// Changed poses one sample of `{ns}/changes` holds at most; a snapshot
+    /// that changed more goes out whole on `{ns}/poses`.
+    pub max_changes: usize,
+    /// Samples of `{ns}/changes` a subscriber's queue holds (and the
+    /// topic's history, for a late subscriber).
+    pub change_buffer: usize,
     /// Rejections kept for late subscribers.
     pub rejection_history: usize,
 }
@@ -81,6 +90,8 @@ impl Default for Qos {
             edge_buffer: 4096,
             gps_buffer: 1024,
             initial_poses: 16384,
+            max_changes: 256,
+            change_buffer: 32,
             rejection_history: 16,
         }
     }
@@ -102,11 +113,14 @@ impl Qos {
             * (self.initial_poses * size_of::<Pose>() + size_of::<SnapshotHeader>()) as u64;
         let rejections = (self.max_subscribers as u64 * 16 + self.rejection_history as u64)
             * size_of::<Rejection>() as u64;
+        // each subscriber: its queue + borrowed 2, plus the history and a loan
+        let changes = ((self.max_subscribers * (self.change_buffer + 2) + self.change_buffer + 1) as u64)
+            * (self.max_changes * size_of::<Pose>() + size_of::<SnapshotHeader>()) as u64;
         let switches = (self.max_subscribers as u64 * 3 + 2)
             * (self.initial_poses * size_of::<Switch>() + size_of::<SwitchesHeader>()) as u64;
         let status =
             ((self.max_frontends + self.max_subscribers) as u64 * 3 + 2) * size_of::<DaemonStatus>() as u64;
-        inputs + snapshot + rejections + switches + status
+        inputs + snapshot + changes + rejections + switches + status
     }
 }
 

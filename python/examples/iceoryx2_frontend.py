@@ -16,8 +16,11 @@ docs/protocol.md, not imported from slamd. The stream is what
 3. when ``k`` brought edges, wait until a snapshot acknowledges the last
    of them (its header's ack for this frontend reaches that number).
 
-After the last keyframe it takes snapshots until none came for 3 s (the
-daemon's closing re-solves are done), then prints the final snapshot's
+Snapshots come as whole maps on ``{ns}/poses`` and, for every version, what
+it changed on ``{ns}/changes``; ``Map`` puts the two together as
+docs/protocol.md ("Reading snapshots") says. After the last keyframe it
+takes snapshots until one says the map is settled (the daemon's closing
+re-solves are done), then prints the final map's
 chi2 as a JSON object on the last line of stdout. ``chi2`` is computed
 from the snapshot's poses over the file's edges, as ``slamd replay``
 reports it; ``snapshot_chi2`` is the header's (with the outlier filter's
@@ -36,7 +39,7 @@ import time
 
 import iceoryx2 as iox2
 
-PROTOCOL_VERSION = 5
+PROTOCOL_VERSION = 6
 PROTOCOL_KEY = "slamd.protocol"
 U32, U64, F64 = ctypes.c_uint32, ctypes.c_uint64, ctypes.c_double
 
@@ -86,7 +89,8 @@ class SnapshotHeader(ctypes.Structure):
                 ("georeferenced", U32), ("has_origin", U32),
                 ("origin", F64 * 3), ("acks", FrontendAck * 8),
                 ("has_covariance", U32), ("pending", U32),
-                ("covariance_keyframe", U64), ("covariance", F64 * 21)]
+                ("covariance_keyframe", U64), ("covariance", F64 * 21),
+                ("base", U64), ("instance", U64), ("whole", U32), ("settling", U32)]
 
 
 @_named("slamd::DaemonStatus")
@@ -105,8 +109,8 @@ class Rejection(ctypes.Structure):
                 ("text", ctypes.c_char * 120)]
 
 
-for _t, _size in ((Keyframe, 96), (Edge, 264), (Pose, 112), (SnapshotHeader, 432),
-                  (DaemonStatus, 624), (Rejection, 160)):
+for _t, _size in ((Keyframe, 96), (Edge, 264), (Pose, 112), (SnapshotHeader, 456),
+                  (DaemonStatus, 648), (Rejection, 160)):
     assert ctypes.sizeof(_t) == _size and ctypes.alignment(_t) == 8, _t
 
 
@@ -195,6 +199,9 @@ class Link:
         self.status = self._topic("status", DaemonStatus).subscriber_builder().create()
         self.poses = self._topic("poses", iox2.Slice[Pose], SnapshotHeader) \
             .subscriber_builder().create()
+        self.changes = self._topic("changes", iox2.Slice[Pose], SnapshotHeader) \
+            .subscriber_builder().create()
+        self.map = Map()
         self.rejections = self._topic("rejections", Rejection).subscriber_builder().create()
         self.ingest = self._event("ingest").notifier_builder().create()
         self.published = self._event("published").listener_builder().create()
@@ -341,15 +348,20 @@ class Link:
     # -- snapshots
 
     def latest_snapshot(self):
-        """The newest snapshot delivered since the last call (never blocks)."""
+        """Takes every whole map and change delivered into the map; the
+        newest header among them, or None (never blocks)."""
         newest = None
-        while True:
-            s = self.poses.receive()
-            if s is None:
-                return newest
-            if newest is not None:
-                newest.delete()  # at most 3 may be borrowed at once
-            newest = s
+        for topic, take in ((self.poses, self.map.whole), (self.changes, self.map.change)):
+            while True:
+                s = topic.receive()
+                if s is None:
+                    break
+                h = header_of(s)
+                take(h, poses_of(s))
+                s.delete()  # at most 3 may be borrowed at once
+                if newest is None or (h.instance, h.version) > (newest.instance, newest.version):
+                    newest = h
+        return newest
 
     def wait_snapshot(self, timeout_s):
         deadline = time.monotonic() + timeout_s
@@ -378,10 +390,49 @@ def header_of(sample):
     return SnapshotHeader.from_buffer_copy(sample.user_header().contents)
 
 
+class Map:
+    """The daemon's map as a subscriber builds it: a whole map from
+    ``{ns}/poses``, then each version's changes from ``{ns}/changes`` whose
+    ``base`` is the version held. A change that cannot be placed yet (its map
+    has not come, or one before it was lost) waits for a whole map."""
+
+    def __init__(self):
+        self.header, self.poses, self.waiting = None, {}, {}
+
+    def _holds(self, h):
+        return (self.header is not None and h.instance == self.header.instance
+                and h.version <= self.header.version)
+
+    def whole(self, h, poses):
+        if self._holds(h):
+            return
+        self.header, self.poses = h, {p.id: p for p in poses}
+        self.waiting = {k: w for k, w in self.waiting.items()
+                        if k[0] == h.instance and k[1] >= h.version}
+        self._place()
+
+    def change(self, h, poses):
+        if not self._holds(h):
+            self.waiting[(h.instance, h.base)] = (h, poses)
+            self._place()
+
+    def _place(self):
+        while self.header is not None:
+            key = (self.header.instance, self.header.version)
+            w = self.waiting.get(key)
+            if w is None or w[0].whole:  # a whole version's map comes on {ns}/poses
+                return
+            del self.waiting[key]
+            self.header = w[0]
+            self.poses.update((p.id, p) for p in w[1])
+
+
 def poses_of(sample):
     # the element count is the header's `poses` (iceoryx2-python 0.10's
     # Slice.len() of a Rust-sent slice counts bytes, not elements)
     n = min(header_of(sample).poses, sample.header.number_of_elements)
+    if n == 0:
+        return []
     p = sample.payload()
     return (Pose * n).from_buffer_copy(ctypes.string_at(p.as_ptr(), n * ctypes.sizeof(Pose)))
 
@@ -389,7 +440,6 @@ def poses_of(sample):
 # ------------------------------------------------------------- the replay
 
 RESTART_POLL = 0.05  # s between looks at the acks while waiting
-QUIET = 3.0  # s without a snapshot after the stream: the daemon is at rest
 SAY_EVERY_S = 5.0  # s between notes on a daemon that is alive but holding
 
 
@@ -397,12 +447,6 @@ class Replay:
     def __init__(self, link, timeout_s):
         self.link, self.timeout_s = link, timeout_s
         self.pending = collections.deque()  # (keyframe index, last message number)
-        self.latest = None
-
-    def _take(self, s):
-        if self.latest is not None:
-            self.latest.delete()
-        self.latest = s
 
     def collect(self, wait_s):
         deadline = time.monotonic() + wait_s
@@ -415,11 +459,10 @@ class Replay:
             self.link.poll()
             if left <= RESTART_POLL:
                 return
-        acked = ack_of(header_of(s).acks, self.link.id)
+        acked = ack_of(s.acks, self.link.id)
         if acked is not None:
             while self.pending and self.pending[0][1] <= acked:
                 self.pending.popleft()
-        self._take(s)
 
     def drain(self):
         """Waits for the acknowledgement of every keyframe sent while the daemon
@@ -450,16 +493,27 @@ class Replay:
         self.drain()
 
     def finish(self):
+        """The settled map: snapshots until one says the daemon's work on the
+        stream is done (``settling`` 0, nothing ``pending``), for as long as
+        the daemon is alive (another frontend may keep it busy: at most
+        max(timeout, 30 s))."""
         self.drain()
+        self.link.heard = time.monotonic()
         deadline = time.monotonic() + max(self.timeout_s, 30.0)
         while time.monotonic() < deadline:
-            s = self.link.wait_snapshot(QUIET)
-            if s is None:
+            if self.link.wait_snapshot(RESTART_POLL) is not None:
+                self.link.heard = time.monotonic()
+            h = self.link.map.header
+            if h is not None and h.settling == 0 and h.pending == 0:
                 break
-            self._take(s)
-        if self.latest is None:
+            self.link.poll()
+            if time.monotonic() - self.link.heard > self.timeout_s:
+                raise SystemExit(f"the daemon serving `{self.link.ns}` did not answer within "
+                                 f"{self.timeout_s:.1f} s (is `slamd run` alive?)")
+        m = self.link.map
+        if m.header is None:
             raise SystemExit("no snapshot arrived")
-        return header_of(self.latest), poses_of(self.latest)
+        return m.header, list(m.poses.values())
 
 
 # ------------------------------------------------------------------ chi2

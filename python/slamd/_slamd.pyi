@@ -43,6 +43,7 @@ class Snapshot:
     keyframes: int
     edges: int
     pending: int
+    settling: bool
     ids: npt.NDArray[np.uint64]
     poses: npt.NDArray[np.float64]
     timestamps: npt.NDArray[np.uint64]

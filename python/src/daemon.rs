@@ -190,7 +190,7 @@ pub struct Snapshots {
     link: SnapshotLink,
 }
 
-fn daemon_snapshot(py: Python<'_>, s: &slamd_protocol::transport::SnapshotSample) -> PyResult<Snapshot> {
+fn daemon_snapshot(py: Python<'_>, s: &slamd_protocol::MapSnapshot) -> PyResult<Snapshot> {
     let h = s.header();
     let poses = s.poses();
     let (width, flat): (usize, Vec<f64>) = if h.dimension == 3 {
@@ -226,6 +226,7 @@ fn daemon_snapshot(py: Python<'_>, s: &slamd_protocol::transport::SnapshotSample
         keyframes: h.keyframes,
         edges: h.edges,
         pending: u64::from(h.pending),
+        settling: h.settling != 0,
         ids: ids(py, poses.iter().map(|p| p.id).collect()).unbind(),
         poses: rows(py, width, flat)?.unbind(),
         timestamps: ids(py, poses.iter().map(|p| p.timestamp_ns).collect()).unbind(),
@@ -283,9 +284,9 @@ impl Snapshots {
     }
 
     /// The newest snapshot delivered since the last call, or None.
-    fn latest(&self, py: Python<'_>) -> PyResult<Option<Snapshot>> {
+    fn latest(&mut self, py: Python<'_>) -> PyResult<Option<Snapshot>> {
         match self.link.latest().map_err(error)? {
-            Some(s) => daemon_snapshot(py, &s).map(Some),
+            Some(s) => daemon_snapshot(py, s).map(Some),
             None => Ok(None),
         }
     }
@@ -293,12 +294,12 @@ impl Snapshots {
     /// Waits up to `timeout` seconds for a snapshot newer than the last one
     /// taken; None on timeout. Ctrl-C interrupts it.
     #[pyo3(signature = (timeout = 5.0))]
-    fn wait(&self, py: Python<'_>, timeout: f64) -> PyResult<Option<Snapshot>> {
+    fn wait(&mut self, py: Python<'_>, timeout: f64) -> PyResult<Option<Snapshot>> {
         let deadline = deadline(timeout)?;
         loop {
             let slice = deadline.saturating_duration_since(Instant::now()).min(SLICE);
             if let Some(s) = self.link.wait(slice).map_err(error)? {
-                return daemon_snapshot(py, &s).map(Some);
+                return daemon_snapshot(py, s).map(Some);
             }
             py.check_signals()?;
             if Instant::now() >= deadline {

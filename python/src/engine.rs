@@ -56,6 +56,10 @@ pub struct Snapshot {
     /// Loop closures held out of the estimate until the outlier filter
     /// decides them.
     pub pending: u64,
+    /// From a daemon: whether it still works on the input so far (a
+    /// re-solve, the outlier filter); False on the settled map. In
+    /// process: whether a re-solve runs or decisions wait.
+    pub settling: bool,
     /// The id of each row of `poses` (keyframes joined to the map).
     pub ids: Py<PyArray1<u64>>,
     /// One row per keyframe: `(x, y, theta)` or `(x, y, z, qx, qy, qz, qw)`.
@@ -96,6 +100,7 @@ fn snapshot<P: EnginePose + PyPose>(py: Python<'_>, e: &Core<P>) -> PyResult<Sna
         keyframes: e.graph().len() as u64,
         edges: e.graph().edges().len() as u64,
         pending: s.pending as u64,
+        settling: e.settling(),
         ids: ids(py, id).unbind(),
         poses: pose_rows(py, poses.into_iter())?.unbind(),
         timestamps: ids(py, s.timestamps().collect()).unbind(),

@@ -35,7 +35,7 @@ use super::pose::EnginePose;
 use super::resolve::Waker;
 use super::{Engine, EngineConfig, EngineStats};
 use crossbeam::channel::{self, Receiver, Sender};
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 
 /// Switches decided: `(edge, switch)`, later ones overriding earlier ones.
@@ -166,6 +166,9 @@ pub(super) struct Worker<P: EnginePose> {
     stats: EngineStats,
     wake: Arc<Mutex<Option<Waker>>>,
     stop: Arc<AtomicBool>,
+    /// Asks sent, and asks the thread has answered (decisions sent).
+    asked: u64,
+    answered: Arc<AtomicU64>,
 }
 
 impl<P: EnginePose> Drop for Worker<P> {
@@ -191,6 +194,8 @@ impl<P: EnginePose> Judge<P> {
         let stop = Arc::new(AtomicBool::new(false));
         let wake: Arc<Mutex<Option<Waker>>> = Arc::default();
         let (stopped, waker) = (Arc::clone(&stop), Arc::clone(&wake));
+        let answered = Arc::new(AtomicU64::new(0));
+        let answers = Arc::clone(&answered);
         std::thread::Builder::new()
             .name("slamd-judge".into())
             .spawn(move || {
@@ -200,12 +205,13 @@ impl<P: EnginePose> Judge<P> {
                     if stopped.load(Ordering::Relaxed) {
                         return;
                     }
-                    let Some(d) = bench.ask(ask) else { continue };
-                    if d.is_empty() {
-                        continue;
-                    }
-                    if decided.send((d, bench.engine.stats())).is_err() {
-                        return;
+                    let decisions = bench.ask(ask).filter(|d| !d.is_empty());
+                    let sent = decisions.map(|d| decided.send((d, bench.engine.stats())));
+                    answers.fetch_add(1, Ordering::Release);
+                    match sent {
+                        None => continue,
+                        Some(Err(_)) => return,
+                        Some(Ok(())) => {}
                     }
                     let wake = waker.lock().map(|w| w.clone()).ok().flatten();
                     if let Some(wake) = wake {
@@ -220,6 +226,8 @@ impl<P: EnginePose> Judge<P> {
             stats,
             wake,
             stop,
+            asked: 0,
+            answered,
         })
     }
 
@@ -238,7 +246,7 @@ impl<P: EnginePose> Judge<P> {
         match self {
             Judge::Inline(bench, outbox) => outbox.extend(bench.ask(ask).unwrap_or_default()),
             Judge::Thread(w) => {
-                let _ = w.asks.send(ask);
+                w.asked += u64::from(w.asks.send(ask).is_ok());
             }
         }
     }
@@ -264,6 +272,14 @@ impl<P: EnginePose> Judge<P> {
                 }
                 all
             }
+        }
+    }
+
+    /// Whether the judge's thread has asks it has not answered yet.
+    pub fn busy(&self) -> bool {
+        match self {
+            Judge::Inline(..) => false,
+            Judge::Thread(w) => w.answered.load(Ordering::Acquire) != w.asked,
         }
     }
 

@@ -50,6 +50,7 @@
 
 mod arrival;
 mod background;
+mod changed;
 mod chi2;
 mod config;
 mod error;
@@ -68,6 +69,7 @@ mod snapshot;
 mod state;
 mod swap;
 
+pub use changed::Changes;
 pub use config::EngineConfig;
 pub use error::EngineError;
 pub use marginals::upper_triangle;
@@ -348,6 +350,14 @@ impl<P: EnginePose> Engine<P> {
             || self.judge.as_ref().is_some_and(|j| j.has_decisions())
     }
 
+    /// True while work the input called for is under way: a re-solve, the
+    /// outlier filter's judge, or decisions not yet taken in. Once it is
+    /// false after the input paused ([`Self::idle`]), the next
+    /// [`Self::update`] publishes the settled map.
+    pub fn settling(&self) -> bool {
+        self.resolving() || self.judge.as_ref().is_some_and(|j| j.busy())
+    }
+
     /// Re-solves inline over everything (abandoning a running re-solve):
     /// the polished estimate of the whole graph. With the filter on, it
     /// first waits for the judge's closing decisions and polishes from the
@@ -366,6 +376,13 @@ impl<P: EnginePose> Engine<P> {
             resolved: true,
             decided,
         }
+    }
+
+    /// Which keyframes' estimates changed since the last call (indices as
+    /// [`Snapshot::entry`] takes them): what a snapshot that carries only
+    /// changes must carry.
+    pub fn take_changes(&mut self) -> Changes {
+        self.state.take_changes()
     }
 
     /// The current estimate.

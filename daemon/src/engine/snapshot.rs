@@ -50,6 +50,19 @@ impl<'a, P: RigidMotion> Snapshot<'a, P> {
             .map(|i| self.keyframes[i].id)
     }
 
+    /// `(id, pose, timestamp ns)` of the keyframe at `index` (arrival
+    /// order), if it is in the estimate.
+    pub fn entry(&self, index: usize) -> Option<(KeyframeId, P, u64)> {
+        let s = self.states.get(index).filter(|s| s.joined)?;
+        Some((self.keyframes[index].id, self.poses[index], s.timestamp_ns))
+    }
+
+    /// Keyframes received, joined to the map or not: the indices
+    /// [`Self::entry`] and [`Self::pose`] take run below it.
+    pub fn keyframes(&self) -> usize {
+        self.keyframes.len()
+    }
+
     /// The pose of one keyframe, if it is in the estimate.
     pub fn pose(&self, index: usize) -> Option<P> {
         (self.states.get(index).is_some_and(|s| s.joined)).then(|| self.poses[index])

@@ -6,6 +6,7 @@
 //! what arrived while it was being built.
 
 use super::arrival::{ArrivalGate, Verdict};
+use super::changed::{Changed, Changes};
 use super::chi2::Chi2Cache;
 use super::gauss_newton::GaussNewton;
 pub use super::model::{EdgeState, FixState, KeyframeState, Model};
@@ -32,6 +33,8 @@ pub struct State<P: EnginePose = Pose2> {
     chi2: Chi2Cache,
     /// The keyframes the last solve moved (a buffer kept between solves).
     moved: Vec<usize>,
+    /// Keyframes whose estimate changed since a snapshot last asked.
+    changed: Changed,
     gate: ArrivalGate<P>,
     /// While catching up: the foreground's estimate of each keyframe it
     /// had joined (see [`Self::set_hints`]).
@@ -68,6 +71,7 @@ impl<P: EnginePose> State<P> {
             gn,
             estimate,
             moved: Vec::new(),
+            changed: Changed::default(),
             gate: ArrivalGate::new(config.outliers),
             hint: Vec::new(),
         }
@@ -158,6 +162,7 @@ impl<P: EnginePose> State<P> {
                     // keyframe 0 fixes the gauge where it is
                     self.gn = GaussNewton::new(gauge);
                     self.model.keyframes[0].joined = true;
+                    self.changed.mark(0);
                 }
                 Ok(())
             }
@@ -377,6 +382,7 @@ impl<P: EnginePose> State<P> {
     fn join(&mut self, k: usize, guess: P) {
         self.model.keyframes[k].joined = true;
         self.estimate[k] = guess;
+        self.changed.mark(k);
         self.gn.add_keyframe(k, guess);
     }
 
@@ -410,6 +416,7 @@ impl<P: EnginePose> State<P> {
         if solved.is_ok() {
             for &k in &changed {
                 self.estimate[k] = self.gn.estimate()[k];
+                self.changed.mark(k);
             }
             self.chi2.refresh_moved(&self.model, &changed, &self.estimate);
         }
@@ -435,12 +442,24 @@ impl<P: EnginePose> State<P> {
     /// rebuild to start from (the factor and the cached χ² are left as
     /// they were: only a rebuild may follow).
     pub fn start_from(&mut self, start: &[P]) {
+        self.changed.mark_all();
         let joined = self.model.keyframes.iter().zip(&mut self.estimate);
         for ((kf, x), s) in joined.zip(start) {
             if kf.joined {
                 *x = *s;
             }
         }
+    }
+
+    /// Which keyframes' estimates changed since the last call.
+    pub fn take_changes(&mut self) -> Changes {
+        self.changed.take()
+    }
+
+    /// Every keyframe's estimate may have changed (this state replaced
+    /// another).
+    pub(super) fn changed_all(&mut self) {
+        self.changed.mark_all();
     }
 
     /// The estimate of every keyframe slot (meaningful where joined).

@@ -137,6 +137,8 @@ impl<P: EnginePose> Engine<P> {
     pub(super) fn replace_state(&mut self, state: State<P>, base: FactorWork) {
         self.work_done += self.state.work() - self.work_base;
         self.work_base = base;
+        let mut state = state;
+        state.changed_all();
         retire(std::mem::replace(&mut self.state, state));
     }
 }

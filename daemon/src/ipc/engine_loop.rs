@@ -5,6 +5,7 @@
 use super::durability::{now_ns, Durability};
 use super::health::Latency;
 use super::held::{Held, Waiting};
+use super::publication::{Carry, Publication};
 use crate::config::Config;
 use crate::engine::{upper_triangle, EdgeInput, Engine, EngineError, EnginePose, FixInput};
 use crate::graph::{EdgeKind, GraphError, KeyframeId, KeyframeInput};
@@ -16,7 +17,7 @@ use slamd_protocol::codec::Origin;
 use slamd_protocol::message::kind;
 use slamd_protocol::transport::{Outlet, TransportError};
 use slamd_protocol::{
-    DaemonStatus, Rejection, RejectionReason, SnapshotHeader, SwitchesHeader, INFORMATION_UPPER,
+    DaemonStatus, Pose, Rejection, RejectionReason, SnapshotHeader, SwitchesHeader, INFORMATION_UPPER,
     PROTOCOL_VERSION,
 };
 use std::time::{Duration, Instant};
@@ -91,11 +92,17 @@ pub struct EngineLoop<P: EnginePose> {
     idle_due: bool,
     /// A loop closure arrived since the switches were last published.
     new_loop_closure: bool,
+    /// Whole maps or changes, and how much went out.
+    publication: Publication,
 }
 
 impl<P: EnginePose> EngineLoop<P> {
     pub fn new(config: Config, outlet: Outlet) -> Self {
         let durability = Durability::new(config.state.checkpoint_interval_s);
+        let publication = Publication::new(
+            config.ipc.max_changes,
+            Duration::from_millis(config.snapshot.whole_every_ms),
+        );
         Self {
             engine: Engine::create(config.engine()),
             outlet,
@@ -120,6 +127,7 @@ impl<P: EnginePose> EngineLoop<P> {
             last_input: Instant::now(),
             idle_due: false,
             new_loop_closure: false,
+            publication,
         }
     }
 
@@ -160,6 +168,14 @@ impl<P: EnginePose> EngineLoop<P> {
         self.last_publish = None;
         self.publish_if_due();
         self.checkpoint();
+        let p = &self.publication;
+        tracing::info!(
+            snapshots = p.published,
+            whole = p.whole,
+            poses = p.poses,
+            bytes_per_snapshot = (p.poses * size_of::<Pose>() as u64) / p.published.max(1),
+            "Snapshots published."
+        );
         self.counters
     }
 
@@ -370,6 +386,15 @@ impl<P: EnginePose> EngineLoop<P> {
             // failed journal commit is tried again
             self.dirty = true;
         }
+        // clients waiting for the final map learn that it is settled
+        self.dirty |= self.last_header.settling != 0 && !self.settling();
+    }
+
+    /// Whether the input so far still has work under way: it came within
+    /// a tick (the engine has not been told it is idle), or the engine
+    /// settles it ([`Engine::settling`]).
+    fn settling(&self) -> bool {
+        self.idle_due || self.engine.settling()
     }
 
     fn publish_if_due(&mut self) {
@@ -388,7 +413,11 @@ impl<P: EnginePose> EngineLoop<P> {
         let report = self.engine.update();
         let solved = t0.elapsed();
         let covariance = self.newest_covariance();
+        let changes = self.engine.take_changes();
         let snap = self.engine.snapshot();
+        let carry = self
+            .publication
+            .plan(snap.version, changes, snap.georef, Instant::now());
         let header = SnapshotHeader {
             protocol: PROTOCOL_VERSION,
             dimension: P::DIMENSION,
@@ -410,18 +439,43 @@ impl<P: EnginePose> EngineLoop<P> {
             pending: snap.pending as u32,
             covariance_keyframe: covariance.map_or(0, |c| c.0),
             covariance: covariance.map_or([0.0; INFORMATION_UPPER], |c| c.1),
+            instance: self.instance,
+            settling: u32::from(self.settling()),
+            ..SnapshotHeader::default()
         };
         let georef = snap.georef;
-        let poses = snap
-            .poses()
-            .zip(snap.timestamps())
-            .map(|((id, p), t)| wire::pose_out(id, &p, t, georef.as_ref()));
+        let out = |(id, p, t): (KeyframeId, P, u64)| wire::pose_out(id, &p, t, georef.as_ref());
+        let result: Result<(), TransportError> = match carry {
+            Carry::Whole => {
+                let poses = snap
+                    .poses()
+                    .zip(snap.timestamps())
+                    .map(|((id, p), t)| out((id, p, t)));
+                let sent = self.outlet.publish_whole(header, snap.len(), poses);
+                if sent.is_ok() {
+                    let joined = (0..snap.keyframes()).map(|k| snap.pose(k).is_some());
+                    self.publication.sent_whole(joined);
+                }
+                sent
+            }
+            Carry::Changes { base, mut keyframes } => {
+                keyframes.retain(|&k| snap.pose(k).is_some());
+                let poses = keyframes.iter().filter_map(|&k| snap.entry(k)).map(out);
+                let header = SnapshotHeader { base, ..header };
+                let sent = self.outlet.publish_changes(header, keyframes.len(), poses);
+                if sent.is_ok() {
+                    self.publication.sent_changes(&keyframes);
+                }
+                sent
+            }
+        };
         self.last_header = SnapshotHeader {
-            poses: snap.len() as u64,
+            poses: self.publication.map_size() as u64,
+            whole: 1,
             ..header
         };
-        let result: Result<(), TransportError> = self.outlet.publish(header, snap.len(), poses);
         if let Err(e) = result {
+            self.publication.failed();
             tracing::error!(error = %e, "Cannot publish a snapshot.");
         }
         if let Some(t) = self.batch_start.take() {

@@ -16,11 +16,10 @@ mod durable;
 pub(crate) mod engine_loop;
 mod health;
 mod held;
+mod publication;
 mod server;
 
 pub use engine_loop::Counters;
 pub use server::{serve, serve_map, serve_until, ServeError, Server};
-pub use slamd_protocol::transport::{
-    SnapshotLink as Snapshots, SnapshotSample, SwitchesSample, TransportError,
-};
-pub use slamd_protocol::{Endpoint, Frontend};
+pub use slamd_protocol::transport::{SnapshotLink as Snapshots, SwitchesSample, TransportError};
+pub use slamd_protocol::{Endpoint, Frontend, MapSnapshot};

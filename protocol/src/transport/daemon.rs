@@ -68,6 +68,7 @@ struct Services {
     _edges: Topic<Edge>,
     _gps: Topic<GpsFix>,
     _poses: Topic<[Pose], SnapshotHeader>,
+    _changes: Topic<[Pose], SnapshotHeader>,
     _rejections: Topic<Rejection>,
     _switches: Topic<[Switch], SwitchesHeader>,
     _status: Topic<DaemonStatus>,
@@ -95,6 +96,7 @@ impl Ingress {
                 pid,
             });
         }
+        let changes = services::changes(&node, &ns, access)?;
         let rejections = services::rejections(&node, &ns, access)?;
         let switches = services::switches(&node, &ns, access)?;
         let status = services::status(&node, &ns, access)?;
@@ -129,6 +131,7 @@ impl Ingress {
                 _edges: edges,
                 _gps: gps,
                 _poses: poses,
+                _changes: changes,
                 _rejections: rejections,
                 _switches: switches,
                 _status: status,
@@ -265,6 +268,8 @@ fn drain_queues(
 pub struct Outlet {
     _node: Node<ipc::Service>,
     poses: Publisher<ipc::Service, [Pose], SnapshotHeader>,
+    changes: Publisher<ipc::Service, [Pose], SnapshotHeader>,
+    max_changes: usize,
     published: Notifier<ipc::Service>,
     rejections: Publisher<ipc::Service, Rejection, ()>,
     switches: Publisher<ipc::Service, [Switch], SwitchesHeader>,
@@ -274,7 +279,8 @@ pub struct Outlet {
 impl Outlet {
     /// Opens the output services an [`Ingress`] created. The snapshot and
     /// switches publishers first reserve `qos.initial_poses` elements (at
-    /// least 1) and grow by powers of two.
+    /// least 1) and grow by powers of two; the changes publisher holds
+    /// `qos.max_changes` poses a sample, always.
     pub fn open(namespace: &str, qos: &Qos) -> Result<Self, TransportError> {
         let ns = Namespace::new(namespace);
         let names = &ns.services;
@@ -293,6 +299,12 @@ impl Outlet {
                 },
                 None => ns.fail("open", &names.poses, &e),
             })?;
+        let max_changes = qos.max_changes.max(1);
+        let changes = services::changes(&node, &ns, Access::Open)?
+            .publisher_builder()
+            .initial_max_slice_len(max_changes)
+            .create()
+            .map_err(|e| ns.fail("open", &names.changes, &e))?;
         let rejections = services::rejections(&node, &ns, Access::Open)?
             .publisher_builder()
             .create()
@@ -314,6 +326,8 @@ impl Outlet {
         Ok(Self {
             _node: node,
             poses,
+            changes,
+            max_changes,
             published,
             rejections,
             switches,
@@ -321,10 +335,10 @@ impl Outlet {
         })
     }
 
-    /// Publishes one snapshot: `header` and `count` poses taken from
-    /// `poses` (written straight into shared memory), then wakes the
-    /// subscribers.
-    pub fn publish(
+    /// Publishes one snapshot whole: `header` and `count` poses taken from
+    /// `poses` (written straight into shared memory) on `{ns}/poses`, a
+    /// sample on `{ns}/changes` saying so, then wakes the subscribers.
+    pub fn publish_whole(
         &self,
         header: SnapshotHeader,
         count: usize,
@@ -332,11 +346,51 @@ impl Outlet {
     ) -> Result<(), TransportError> {
         let header = SnapshotHeader {
             poses: count as u64,
+            whole: 1,
             ..header
         };
-        send_slice(&self.poses, header, count, poses, "snapshot")?;
+        send_slice(
+            &self.poses,
+            SnapshotHeader { base: 0, ..header },
+            count,
+            poses,
+            "snapshot",
+        )?;
+        let marker = SnapshotHeader { poses: 0, ..header };
+        send_slice(&self.changes, marker, 0, std::iter::empty(), "snapshot changes")?;
         let _ = self.published.notify();
         Ok(())
+    }
+
+    /// Publishes what one snapshot changed since version `header.base`:
+    /// `count` poses (at most [`Self::max_changes`]) on `{ns}/changes`,
+    /// then wakes the subscribers.
+    pub fn publish_changes(
+        &self,
+        header: SnapshotHeader,
+        count: usize,
+        poses: impl Iterator<Item = Pose>,
+    ) -> Result<(), TransportError> {
+        if count > self.max_changes {
+            return Err(TransportError::other(
+                "send snapshot changes",
+                format_args!("{count} poses, more than the {} a sample holds", self.max_changes),
+            ));
+        }
+        let header = SnapshotHeader {
+            poses: count as u64,
+            whole: 0,
+            ..header
+        };
+        send_slice(&self.changes, header, count, poses, "snapshot changes")?;
+        let _ = self.published.notify();
+        Ok(())
+    }
+
+    /// The most poses one sample of changes holds; a snapshot that changed
+    /// more goes out whole.
+    pub fn max_changes(&self) -> usize {
+        self.max_changes
     }
 
     /// Publishes the switch of every loop closure (`count` taken from
@@ -361,6 +415,7 @@ impl Outlet {
     /// not wait for new input.
     pub fn publish_status(&self, m: DaemonStatus) -> Result<(), TransportError> {
         let _ = self.poses.update_connections();
+        let _ = self.changes.update_connections();
         let _ = self.switches.update_connections();
         self.status
             .send_copy(m)

@@ -25,7 +25,7 @@ mod snapshots;
 pub use daemon::{Exit, Ingress, Input, Outlet, Wake};
 pub use error::TransportError;
 pub use frontend::FrontendLink;
-pub use snapshots::{SnapshotLink, SnapshotSample, SwitchesSample};
+pub use snapshots::{SnapshotLink, SwitchesSample};
 
 use crate::message::PROTOCOL_VERSION;
 use crate::service::PROTOCOL_KEY;

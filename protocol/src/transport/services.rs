@@ -148,6 +148,32 @@ pub(crate) fn poses(
     topic(builder, ns, name, access, latest_value)
 }
 
+/// What each snapshot changed, daemon → subscribers. Created with one
+/// publisher and `max_subscribers` subscribers that each queue
+/// `change_buffer` samples (safe overflow: a reader that falls behind loses
+/// the oldest and waits for the next whole map), and a history of
+/// `change_buffer` so a late subscriber can catch up from the last whole
+/// map.
+pub(crate) fn changes(
+    node: &Node<ipc::Service>,
+    ns: &Namespace,
+    access: Access,
+) -> Result<Topic<[Pose], SnapshotHeader>, TransportError> {
+    let name = &ns.services.changes;
+    let builder = node
+        .service_builder(&service_name(name)?)
+        .publish_subscribe::<[Pose]>()
+        .user_header::<SnapshotHeader>();
+    topic(builder, ns, name, access, |q| TopicSizes {
+        publishers: 1,
+        subscribers: q.max_subscribers,
+        buffer: q.change_buffer.max(1),
+        borrowed: Some(MAX_BORROWED),
+        history: q.change_buffer.max(1),
+        safe_overflow: true,
+    })
+}
+
 /// Loop-closure switches, daemon → subscribers; sized as [`poses`].
 pub(crate) fn switches(
     node: &Node<ipc::Service>,
@@ -387,6 +413,8 @@ mod tests {
             edge_buffer: 6,
             gps_buffer: 7,
             initial_poses: 8,
+            max_changes: 10,
+            change_buffer: 11,
             rejection_history: 9,
         }
     }
@@ -410,6 +438,7 @@ mod tests {
         assert_eq!(edges(&node, &ns, open).err(), none);
         assert_eq!(gps(&node, &ns, open).err(), none);
         assert_eq!(poses(&node, &ns, open).err(), none);
+        assert_eq!(changes(&node, &ns, open).err(), none);
         assert_eq!(rejections(&node, &ns, open).err(), none);
         assert_eq!(switches(&node, &ns, open).err(), none);
         assert_eq!(ingest(&node, &ns, open).err(), none);
@@ -450,6 +479,11 @@ mod tests {
             assert_eq!(c.history_size(), 1);
             assert!(c.has_safe_overflow());
         }
+        let changes_ = changes(&node, &ns, create).unwrap();
+        let c = changes_.static_config();
+        assert_eq!((c.max_publishers(), c.max_subscribers()), (1, 4));
+        assert_eq!((c.subscriber_max_buffer_size(), c.history_size()), (11, 11));
+        assert!(c.has_safe_overflow());
         let rejections_ = rejections(&node, &ns, create).unwrap();
         let c = rejections_.static_config();
         assert_eq!((c.max_publishers(), c.max_subscribers()), (1, 4));
@@ -467,6 +501,7 @@ mod tests {
         assert!(edges(&node, &ns, open).is_ok());
         assert!(gps(&node, &ns, open).is_ok());
         assert!(poses(&node, &ns, open).is_ok());
+        assert!(changes(&node, &ns, open).is_ok());
         assert!(rejections(&node, &ns, open).is_ok());
         assert!(switches(&node, &ns, open).is_ok());
         assert!(ingest(&node, &ns, open).is_ok());

@@ -133,7 +133,6 @@ pub struct DaemonSink<P: RigidMotion> {
     namespace: String,
     /// (keyframe index, last message number, publish time) awaiting a snapshot
     pending: VecDeque<(usize, u64, Instant)>,
-    latest: Option<slamd::ipc::SnapshotSample>,
     pace: Option<(Instant, Duration)>,
     /// The daemon's last sign of life: a snapshot or a status.
     heard: Instant,
@@ -173,7 +172,6 @@ impl<P: RigidMotion> DaemonSink<P> {
             timeout,
             namespace: namespace.to_string(),
             pending: VecDeque::new(),
-            latest: None,
             pace: rate.map(|hz| (Instant::now(), Duration::from_secs_f64(1.0 / hz))),
             heard: Instant::now(),
             holding: false,
@@ -187,11 +185,11 @@ impl<P: RigidMotion> DaemonSink<P> {
     fn collect(&mut self, wait: Duration) -> anyhow::Result<Vec<(usize, f64)>> {
         let mut done = Vec::new();
         let deadline = Instant::now() + wait;
-        let snapshot = loop {
+        let acked = loop {
             let left = deadline.saturating_duration_since(Instant::now());
             if let Some(s) = self.snapshots.wait(left.min(RESTART_POLL))? {
                 self.heard = Instant::now();
-                break Some(s);
+                break Some(s.header().ack_of(self.frontend.id()));
             }
             if let Some(status) = self.snapshots.status()? {
                 self.heard = Instant::now();
@@ -202,15 +200,12 @@ impl<P: RigidMotion> DaemonSink<P> {
                 break None;
             }
         };
-        if let Some(s) = snapshot {
+        if let Some(Some(acked)) = acked {
             let now = Instant::now();
-            if let Some(acked) = s.header().ack_of(self.frontend.id()) {
-                while self.pending.front().is_some_and(|p| p.1 <= acked) {
-                    let (k, _, t) = self.pending.pop_front().expect("non-empty");
-                    done.push((k, now.duration_since(t).as_secs_f64() * 1e6));
-                }
+            while self.pending.front().is_some_and(|p| p.1 <= acked) {
+                let (k, _, t) = self.pending.pop_front().expect("non-empty");
+                done.push((k, now.duration_since(t).as_secs_f64() * 1e6));
             }
-            self.latest = Some(s);
         }
         Ok(done)
     }
@@ -305,7 +300,7 @@ impl<P: ReplayPose> Sink<P> for DaemonSink<P> {
     }
 
     fn poses(&mut self) -> anyhow::Result<HashMap<KeyframeId, P>> {
-        let s = self.latest.as_ref().ok_or_else(|| self.no_answer())?;
+        let s = self.snapshots.current().ok_or_else(|| self.no_answer())?;
         (s.poses().iter())
             .map(|p| {
                 let pose = p
@@ -318,26 +313,18 @@ impl<P: ReplayPose> Sink<P> for DaemonSink<P> {
 
     fn finish(&mut self) -> anyhow::Result<(HashMap<KeyframeId, P>, usize, Instant)> {
         Sink::<P>::drain(self)?;
-        // the daemon re-solves once input pauses, and again if edges came
-        // in during that re-solve, and its filter's judge decides the loop
-        // closures still pending: take snapshots until none is pending and
-        // it is quiet (the first re-solved one may predate the last edges'
-        // polish), for as long as the daemon shows it is alive
+        // the daemon re-solves once input pauses, and its filter's judge
+        // decides the loop closures still pending: take snapshots until one
+        // says the map is settled, for as long as the daemon shows it is
+        // alive (another frontend may keep it busy: stop after a while)
         let mut ready = Instant::now();
-        // (another frontend may keep it publishing: stop taking snapshots
-        // after a while)
         let deadline = ready + self.timeout.max(Duration::from_secs(30));
-        loop {
-            if let Some(s) = self.snapshots.wait(QUIET)? {
-                self.latest = Some(s);
+        while Instant::now() < deadline {
+            if self.snapshots.wait(RESTART_POLL)?.is_some() {
                 (ready, self.heard) = (Instant::now(), Instant::now());
-                if ready < deadline {
-                    continue;
-                }
-                break;
             }
-            let pending = self.latest.as_ref().map_or(0, |s| s.header().pending);
-            if pending == 0 {
+            let h = self.snapshots.current().map(|s| *s.header());
+            if h.is_some_and(|h| h.settling == 0 && h.pending == 0) {
                 break;
             }
             if self.snapshots.status()?.is_some() {
@@ -347,12 +334,12 @@ impl<P: ReplayPose> Sink<P> for DaemonSink<P> {
                 return Err(self.no_answer());
             }
         }
-        let resolves = self.latest.as_ref().map_or(0, |s| s.header().resolves as usize);
+        let resolves = (self.snapshots.current()).map_or(0, |s| s.header().resolves as usize);
         Ok((self.poses()?, resolves, ready))
     }
 
     fn enu(&mut self) -> anyhow::Result<HashMap<KeyframeId, c64>> {
-        let s = self.latest.as_ref().ok_or_else(|| self.no_answer())?;
+        let s = self.snapshots.current().ok_or_else(|| self.no_answer())?;
         if s.header().georeferenced == 0 {
             return Ok(HashMap::new());
         }
@@ -377,7 +364,3 @@ const RESTART_POLL: Duration = Duration::from_millis(50);
 
 /// A replay waiting for a daemon that is alive says why at most this often.
 const SAY_EVERY: Duration = Duration::from_secs(5);
-
-/// No snapshot for this long after the stream ends: the daemon's closing
-/// re-solves are done.
-const QUIET: Duration = Duration::from_secs(3);

@@ -279,7 +279,7 @@ fn serve(
 ) -> anyhow::Result<()> {
     let mut frame = Frame::default();
     let mut status = None;
-    while let Some(link) = connect(namespace) {
+    while let Some(mut link) = connect(namespace) {
         tracing::info!(namespace, "Viewing.");
         let mut heard = Instant::now();
         loop {
