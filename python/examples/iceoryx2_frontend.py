@@ -495,17 +495,22 @@ class Replay:
     def finish(self):
         """The settled map: snapshots until one says the daemon's work on the
         stream is done (``settling`` 0, nothing ``pending``), for as long as
-        the daemon is alive (another frontend may keep it busy: at most
-        max(timeout, 30 s))."""
+        the daemon is alive (while other frontends' input keeps it busy, at
+        most max(timeout, 30 s))."""
         self.drain()
         self.link.heard = time.monotonic()
         deadline = time.monotonic() + max(self.timeout_s, 30.0)
-        while time.monotonic() < deadline:
+        def given(h):
+            return None if h is None else (h.keyframes, h.edges, h.fixes)
+        ours = given(self.link.map.header)
+        while True:
             if self.link.wait_snapshot(RESTART_POLL) is not None:
                 self.link.heard = time.monotonic()
             h = self.link.map.header
             if h is not None and h.settling == 0 and h.pending == 0:
                 break
+            if time.monotonic() > deadline and given(h) != ours:
+                break  # other frontends keep it busy
             self.link.poll()
             if time.monotonic() - self.link.heard > self.timeout_s:
                 raise SystemExit(f"the daemon serving `{self.link.ns}` did not answer within "

@@ -44,6 +44,10 @@ pub enum Msg<P: EnginePose> {
     Shutdown,
 }
 
+/// The switches of every loop closure go out at most this often while the
+/// daemon works on input (and with every settled snapshot).
+const SWITCHES_EVERY: Duration = Duration::from_millis(100);
+
 /// A pause in input after which a finished re-solve is published at once.
 const QUIET_INPUT: Duration = Duration::from_millis(20);
 
@@ -90,8 +94,10 @@ pub struct EngineLoop<P: EnginePose> {
     last_input: Instant,
     /// Input came since the engine was last told it is idle.
     idle_due: bool,
-    /// A loop closure arrived since the switches were last published.
-    new_loop_closure: bool,
+    /// A loop closure arrived or a switch changed since the switches were
+    /// last published, and when they were.
+    switches_due: bool,
+    last_switches: Option<Instant>,
     /// Whole maps or changes, and how much went out.
     publication: Publication,
 }
@@ -126,7 +132,8 @@ impl<P: EnginePose> EngineLoop<P> {
             last_publish: None,
             last_input: Instant::now(),
             idle_due: false,
-            new_loop_closure: false,
+            switches_due: false,
+            last_switches: None,
             publication,
         }
     }
@@ -273,7 +280,7 @@ impl<P: EnginePose> EngineLoop<P> {
             Ok(_) => {
                 self.counters.edges += 1;
                 self.dirty = true;
-                self.new_loop_closure |= edge.kind != EdgeKind::Odometry;
+                self.switches_due |= edge.kind != EdgeKind::Odometry;
             }
             Err(EngineError::Graph(GraphError::UnknownKeyframe(missing))) => {
                 let h = Waiting {
@@ -489,7 +496,11 @@ impl<P: EnginePose> EngineLoop<P> {
             publish_us = (t0.elapsed() - solved).as_micros() as u64,
             "Snapshot published."
         );
-        if report.resolved || report.decided > 0 || self.new_loop_closure {
+        self.switches_due |= report.resolved || report.decided > 0;
+        // every loop closure's switch is a list the size of the map: at most
+        // every SWITCHES_EVERY, and with the settled map
+        let recent = self.last_switches.is_some_and(|t| t.elapsed() < SWITCHES_EVERY);
+        if self.switches_due && !(recent && header.settling != 0) {
             self.publish_switches(report.version);
         }
         self.dirty = false;
@@ -539,7 +550,8 @@ impl<P: EnginePose> EngineLoop<P> {
 
     /// Publishes the filter's switch of every loop closure.
     fn publish_switches(&mut self, version: u64) {
-        self.new_loop_closure = false;
+        self.switches_due = false;
+        self.last_switches = Some(Instant::now());
         let edges = self.engine.graph().edges();
         let switches = self.engine.switches();
         let loops: Vec<usize> = (0..edges.len())

@@ -8,6 +8,7 @@ use slamd::engine::{Engine, EnginePose, EngineStats};
 use slamd::geometry::Pose2;
 use slamd::graph::{KeyframeId, Pose3, RigidMotion};
 use slamd::ipc::{Frontend, Snapshots};
+use slamd_protocol::SnapshotHeader;
 use std::collections::{HashMap, VecDeque};
 use std::time::{Duration, Instant};
 
@@ -316,15 +317,20 @@ impl<P: ReplayPose> Sink<P> for DaemonSink<P> {
         // the daemon re-solves once input pauses, and its filter's judge
         // decides the loop closures still pending: take snapshots until one
         // says the map is settled, for as long as the daemon shows it is
-        // alive (another frontend may keep it busy: stop after a while)
+        // alive (while other frontends' input keeps it busy, for a while)
         let mut ready = Instant::now();
         let deadline = ready + self.timeout.max(Duration::from_secs(30));
-        while Instant::now() < deadline {
+        let input = |h: &SnapshotHeader| (h.keyframes, h.edges, h.fixes);
+        let ours = self.snapshots.current().map(|s| input(s.header()));
+        loop {
             if self.snapshots.wait(RESTART_POLL)?.is_some() {
                 (ready, self.heard) = (Instant::now(), Instant::now());
             }
             let h = self.snapshots.current().map(|s| *s.header());
             if h.is_some_and(|h| h.settling == 0 && h.pending == 0) {
+                break;
+            }
+            if Instant::now() > deadline && h.map(|h| input(&h)) != ours {
                 break;
             }
             if self.snapshots.status()?.is_some() {
