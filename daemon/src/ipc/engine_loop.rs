@@ -92,6 +92,9 @@ pub struct EngineLoop<P: EnginePose> {
     pub(super) dirty: bool,
     last_publish: Option<Instant>,
     last_input: Instant,
+    /// When the last snapshot that answered input went out: a frontend
+    /// waiting for it is not a pause in input.
+    last_answer: Instant,
     /// Input came since the engine was last told it is idle.
     idle_due: bool,
     /// A loop closure arrived or a switch changed since the switches were
@@ -131,6 +134,7 @@ impl<P: EnginePose> EngineLoop<P> {
             dirty: false,
             last_publish: None,
             last_input: Instant::now(),
+            last_answer: Instant::now(),
             idle_due: false,
             switches_due: false,
             last_switches: None,
@@ -197,7 +201,7 @@ impl<P: EnginePose> EngineLoop<P> {
             _ => tick,
         };
         if self.idle_due {
-            wait.min(tick.saturating_sub(self.last_input.elapsed()).max(floor))
+            wait.min(tick.saturating_sub(self.quiet_for()).max(floor))
         } else {
             wait
         }
@@ -381,7 +385,7 @@ impl<P: EnginePose> EngineLoop<P> {
             ));
         }
         let tick = Duration::from_millis(self.config.ipc.tick_ms);
-        if self.last_input.elapsed() >= tick {
+        if self.quiet_for() >= tick {
             self.idle_due = false;
             self.engine.idle();
         }
@@ -395,6 +399,15 @@ impl<P: EnginePose> EngineLoop<P> {
         }
         // clients waiting for the final map learn that it is settled
         self.dirty |= self.last_header.settling != 0 && !self.settling();
+    }
+
+    /// How long input has paused: since the last message, or since the
+    /// snapshot that answered it if that went out later (a frontend that
+    /// waits for its acknowledgement while the engine works has not
+    /// paused; telling the engine it idles then would start the closing
+    /// re-solves in the middle of a stream).
+    fn quiet_for(&self) -> Duration {
+        self.last_input.max(self.last_answer).elapsed()
     }
 
     /// Whether the input so far still has work under way: it came within
@@ -487,6 +500,7 @@ impl<P: EnginePose> EngineLoop<P> {
         }
         if let Some(t) = self.batch_start.take() {
             self.latency.push(t.elapsed());
+            self.last_answer = Instant::now();
         }
         tracing::debug!(
             version = report.version,
