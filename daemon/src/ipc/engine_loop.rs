@@ -434,6 +434,10 @@ impl<P: EnginePose> EngineLoop<P> {
         let solved = t0.elapsed();
         let covariance = self.newest_covariance();
         let changes = self.engine.take_changes();
+        let settling = self.settling();
+        if !settling && self.last_header.settling != 0 {
+            self.publication.whole_next();
+        }
         let snap = self.engine.snapshot();
         let carry = self
             .publication
@@ -460,7 +464,7 @@ impl<P: EnginePose> EngineLoop<P> {
             covariance_keyframe: covariance.map_or(0, |c| c.0),
             covariance: covariance.map_or([0.0; INFORMATION_UPPER], |c| c.1),
             instance: self.instance,
-            settling: u32::from(self.settling()),
+            settling: u32::from(settling),
             ..SnapshotHeader::default()
         };
         let georef = snap.georef;
@@ -495,7 +499,7 @@ impl<P: EnginePose> EngineLoop<P> {
             ..header
         };
         if let Err(e) = result {
-            self.publication.failed();
+            self.publication.whole_next();
             tracing::error!(error = %e, "Cannot publish a snapshot.");
         }
         if let Some(t) = self.batch_start.take() {

@@ -8,8 +8,10 @@
 //! was replaced (a re-solve or refresh swapped in), when more than
 //! `ipc.max_changes` poses changed, when the georeference changed (every
 //! ENU pose moves with it), after a failed send (a subscriber would miss
-//! the changes it lost), and at least every `snapshot.whole_every_ms`, so a
-//! late subscriber or one whose queue overflowed has a map to start from.
+//! the changes it lost), with the settled map (a reader that only takes
+//! whole maps gets the final one), and at least every
+//! `snapshot.whole_every_ms`, so a late subscriber or one whose queue
+//! overflowed has a map to start from.
 
 use crate::engine::Changes;
 use crate::gps::Georef;
@@ -108,9 +110,9 @@ impl Publication {
         self.poses += keyframes.len() as u64;
     }
 
-    /// The snapshot just planned could not be sent: the next goes out
-    /// whole.
-    pub fn failed(&mut self) {
+    /// The next snapshot goes out whole (the one just planned could not be
+    /// sent, or the next is the settled map).
+    pub fn whole_next(&mut self) {
         self.base = None;
     }
 
@@ -155,7 +157,7 @@ mod tests {
         assert_eq!(p.plan(10, some(&[1]), g, ms(1005)), Carry::Whole);
         // a failed send: the next goes out whole
         assert_eq!(p.plan(11, some(&[1]), g, ms(1006)), changes(10, &[1]));
-        p.failed();
+        p.whole_next();
         assert_eq!(p.plan(12, some(&[1]), g, ms(1007)), Carry::Whole);
     }
 
