@@ -1,7 +1,8 @@
 //! [`Changed`]: which keyframes' estimates changed since a snapshot last
 //! asked, so that a snapshot can carry only those.
 
-/// What changed since the last [`Changed::take`].
+/// What changed since the engine was last asked
+/// ([`Engine::take_changes`](super::Engine::take_changes)).
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub enum Changes {
     /// Possibly every keyframe: the estimate was replaced (a re-solve or a
