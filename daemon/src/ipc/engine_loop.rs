@@ -92,9 +92,11 @@ pub struct EngineLoop<P: EnginePose> {
     pub(super) dirty: bool,
     last_publish: Option<Instant>,
     last_input: Instant,
-    /// When the last snapshot that answered input went out: a frontend
-    /// waiting for it is not a pause in input.
+    /// When the last snapshot that answered input went out (a frontend
+    /// waiting for it is not a pause in input), and whether input came
+    /// since.
     last_answer: Instant,
+    answer_due: bool,
     /// Input came since the engine was last told it is idle.
     idle_due: bool,
     /// A loop closure arrived or a switch changed since the switches were
@@ -135,6 +137,7 @@ impl<P: EnginePose> EngineLoop<P> {
             last_publish: None,
             last_input: Instant::now(),
             last_answer: Instant::now(),
+            answer_due: false,
             idle_due: false,
             switches_due: false,
             last_switches: None,
@@ -242,7 +245,7 @@ impl<P: EnginePose> EngineLoop<P> {
     fn take(&mut self, r: Record<P>) {
         if self.admit(r) {
             self.last_input = Instant::now();
-            self.idle_due = true;
+            (self.idle_due, self.answer_due) = (true, true);
             self.apply(r);
         }
     }
@@ -386,6 +389,13 @@ impl<P: EnginePose> EngineLoop<P> {
         }
         let tick = Duration::from_millis(self.config.ipc.tick_ms);
         if self.quiet_for() >= tick {
+            if self.idle_due {
+                tracing::debug!(
+                    quiet_ms = self.quiet_for().as_millis() as u64,
+                    keyframes = self.counters.keyframes,
+                    "Input paused; the engine idles."
+                );
+            }
             self.idle_due = false;
             self.engine.idle();
         }
@@ -504,6 +514,8 @@ impl<P: EnginePose> EngineLoop<P> {
         }
         if let Some(t) = self.batch_start.take() {
             self.latency.push(t.elapsed());
+        }
+        if std::mem::take(&mut self.answer_due) {
             self.last_answer = Instant::now();
         }
         tracing::debug!(
