@@ -2,12 +2,14 @@
 //! refusals as rejections. Input messages are encoded and decoded, both
 //! ways side by side, by [`slamd_protocol::codec`].
 
-use crate::engine::EngineError;
+use crate::engine::{Engine, EngineError, EnginePose};
 use crate::geometry::Pose2;
 use crate::gps::Georef;
+use crate::graph::EdgeKind;
 use crate::graph::{GraphError, KeyframeId};
+use crate::outliers::REJECTED_BELOW;
 use slamd_protocol::codec::{gps_reason, reject, Origin};
-use slamd_protocol::{Pose, Rejection, RejectionReason, Switch};
+use slamd_protocol::{Pose, Rejection, RejectionReason, Switch, SwitchesHeader, PROTOCOL_VERSION};
 use slamd_types::RigidMotion;
 
 /// Keyframe `id`'s pose `p` in the map frame and its timestamp, with its
@@ -46,6 +48,34 @@ pub fn switch_out(from: KeyframeId, to: KeyframeId, o: Origin, weight: f64, pend
         sequence: o.sequence,
         weight,
     }
+}
+
+/// The switch of every loop closure of `engine`, in arrival order, and
+/// their header for snapshot `version` (its `count` left 0: the transport
+/// sets it).
+pub fn switches_out<P: EnginePose>(engine: &Engine<P>, version: u64) -> (SwitchesHeader, Vec<Switch>) {
+    let (graph, switches) = (engine.graph(), engine.switches());
+    let edges = graph.edges();
+    let loops = (0..edges.len()).filter(|&e| edges[e].kind != EdgeKind::Odometry);
+    let out: Vec<Switch> = loops
+        .map(|e| {
+            let (edge, pending) = (&edges[e], engine.is_pending(e));
+            let (from, to) = (graph.id_of(edge.from), graph.id_of(edge.to));
+            switch_out(from, to, engine.edge_origin(e), switches[e], pending)
+        })
+        .collect();
+    let pending = out.iter().filter(|s| s.pending != 0).count();
+    let rejected = (out.iter())
+        .filter(|s| s.weight < REJECTED_BELOW && s.pending == 0)
+        .count();
+    let header = SwitchesHeader {
+        protocol: PROTOCOL_VERSION,
+        pending: pending as u32,
+        version,
+        count: 0,
+        rejected: rejected as u64,
+    };
+    (header, out)
 }
 
 /// The rejection for a change the engine refused.

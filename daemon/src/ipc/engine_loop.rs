@@ -9,7 +9,6 @@ use super::publication::{Carry, Publication};
 use crate::config::Config;
 use crate::engine::{upper_triangle, EdgeInput, Engine, EngineError, EnginePose, FixInput};
 use crate::graph::{EdgeKind, GraphError, KeyframeId, KeyframeInput};
-use crate::outliers::REJECTED_BELOW;
 use crate::store::Record;
 use crate::wire::{self, engine_rejection};
 use crossbeam::channel::{Receiver, RecvTimeoutError};
@@ -17,8 +16,7 @@ use slamd_protocol::codec::Origin;
 use slamd_protocol::message::kind;
 use slamd_protocol::transport::{Outlet, TransportError};
 use slamd_protocol::{
-    DaemonStatus, Pose, Rejection, RejectionReason, SnapshotHeader, SwitchesHeader, INFORMATION_UPPER,
-    PROTOCOL_VERSION,
+    DaemonStatus, Pose, Rejection, RejectionReason, SnapshotHeader, INFORMATION_UPPER, PROTOCOL_VERSION,
 };
 use std::time::{Duration, Instant};
 
@@ -582,36 +580,9 @@ impl<P: EnginePose> EngineLoop<P> {
     fn publish_switches(&mut self, version: u64) {
         self.switches_due = false;
         self.last_switches = Some(Instant::now());
-        let edges = self.engine.graph().edges();
-        let switches = self.engine.switches();
-        let loops: Vec<usize> = (0..edges.len())
-            .filter(|&e| edges[e].kind != EdgeKind::Odometry)
-            .collect();
-        let pending = loops.iter().filter(|&&e| self.engine.is_pending(e)).count();
-        let rejected = (loops.iter())
-            .filter(|&&e| switches[e] < REJECTED_BELOW && !self.engine.is_pending(e))
-            .count();
-        let header = SwitchesHeader {
-            protocol: PROTOCOL_VERSION,
-            pending: pending as u32,
-            version,
-            count: 0,
-            rejected: rejected as u64,
-        };
-        let graph = self.engine.graph();
-        let items = loops.iter().map(|&e| {
-            let edge = &edges[e];
-            let o = self.engine.edge_origin(e);
-            let pending = self.engine.is_pending(e);
-            wire::switch_out(
-                graph.id_of(edge.from),
-                graph.id_of(edge.to),
-                o,
-                switches[e],
-                pending,
-            )
-        });
-        if let Err(e) = self.outlet.publish_switches(header, loops.len(), items) {
+        let (header, switches) = wire::switches_out(&self.engine, version);
+        let count = switches.len();
+        if let Err(e) = self.outlet.publish_switches(header, count, switches.into_iter()) {
             tracing::error!(error = %e, "Cannot publish the switches.");
         }
     }
