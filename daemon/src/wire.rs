@@ -5,8 +5,7 @@
 use crate::engine::{Engine, EngineError, EnginePose};
 use crate::geometry::Pose2;
 use crate::gps::Georef;
-use crate::graph::EdgeKind;
-use crate::graph::{GraphError, KeyframeId};
+use crate::graph::{EdgeKind, GraphError, KeyframeId};
 use crate::outliers::REJECTED_BELOW;
 use slamd_protocol::codec::{gps_reason, reject, Origin};
 use slamd_protocol::{Pose, Rejection, RejectionReason, Switch, SwitchesHeader, PROTOCOL_VERSION};

@@ -490,11 +490,13 @@ impl<P: EnginePose> EngineLoop<P> {
                 }
                 sent
             }
-            Carry::Changes { base, mut keyframes } => {
-                keyframes.retain(|&k| snap.pose(k).is_some());
-                let poses = keyframes.iter().filter_map(|&k| snap.entry(k)).map(out);
+            Carry::Changes { base, keyframes } => {
+                // only a rebuild takes a keyframe out of the map, and it goes out whole
+                let (keyframes, entries): (Vec<usize>, Vec<_>) = (keyframes.into_iter())
+                    .filter_map(|k| Some((k, snap.entry(k)?)))
+                    .unzip();
                 let header = SnapshotHeader { base, ..header };
-                let sent = self.outlet.publish_changes(header, keyframes.len(), poses);
+                let sent = (self.outlet).publish_changes(header, entries.len(), entries.into_iter().map(out));
                 if sent.is_ok() {
                     self.publication.sent_changes(&keyframes);
                 }

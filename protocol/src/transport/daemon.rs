@@ -363,7 +363,7 @@ impl Outlet {
     }
 
     /// Publishes what one snapshot changed since version `header.base`:
-    /// `count` poses (at most [`Self::max_changes`]) on `{ns}/changes`,
+    /// `count` poses (at most `qos.max_changes`) on `{ns}/changes`,
     /// then wakes the subscribers.
     pub fn publish_changes(
         &self,
@@ -385,12 +385,6 @@ impl Outlet {
         send_slice(&self.changes, header, count, poses, "snapshot changes")?;
         let _ = self.published.notify();
         Ok(())
-    }
-
-    /// The most poses one sample of changes holds; a snapshot that changed
-    /// more goes out whole.
-    pub fn max_changes(&self) -> usize {
-        self.max_changes
     }
 
     /// Publishes the switch of every loop closure (`count` taken from
