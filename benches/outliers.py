@@ -2,15 +2,16 @@
 """Robustness: wrong loop closures, filtered online, in one run.
 
     cargo build --release --bin slamd
-    python3 benches/outliers.py [--datasets manhattan city intel ringcity]
+    python3 benches/outliers.py [--datasets manhattan city intel ringcity sphere]
                                 [--kinds random local random-grouped local-grouped]
                                 [--counts 100 1000 4000] [--peers --peer-timeout 600]
 
 Paper B's protocol, extended (docs/design.md, "Robust kernels and
 switches"). ../shared/tools/add_outliers.py injects Vertigo-style loop
-closures (seed --seed); `slamd replay --embedded` streams the spoiled file
-in time order (max(i, j)), one snapshot per keyframe, the filter on with
-its defaults. Per run:
+closures (seed --seed; benches/add_outliers3.py into Sphere2500, the
+`sphere` dataset, for which no peer runs); `slamd replay --embedded`
+streams the spoiled file in time order (max(i, j)), one snapshot per
+keyframe, the filter on with its defaults. Per run:
 
 - precision / recall of the injected edges (an edge counts as caught when
   its final switch is < 0.5; `rejected_edges` in slamd's JSON);
@@ -37,12 +38,15 @@ import argparse, json, math, os, subprocess, sys, tempfile, time
 from common import BIN, DATA, HERE, slamd
 
 TOOL = os.path.join(DATA, "..", "tools", "add_outliers.py")
+TOOL3 = os.path.join(HERE, "add_outliers3.py")
 DATASETS = {  # name: (file, ground truth)
     "manhattan": ("manhattanolson3500_g2oversion.g2o", "groundtruth/manhattanolson3500_groundtruth_isam.txt"),
     "city": ("city10000.g2o", "groundtruth/city10000_groundtruth_isam.txt"),
     "intel": ("intel_sesync.g2o", None),
     "ringcity": ("ringcity.g2o", "groundtruth/ringcity_groundtruth.g2o"),
+    "sphere": ("3d/sphere2500.g2o", "3d/groundtruth/sphere2500_groundtruth_isam.txt"),
 }
+THREE_D = {"sphere"}  # spoiled by benches/add_outliers3.py; no peers
 
 
 def score(binary, clean, poses, gt):
@@ -156,7 +160,8 @@ def main():
         for kind in args.kinds:
             for count in args.counts:
                 spoiled = os.path.join(tmp, f"{name}-{kind}-{count}.g2o")
-                subprocess.run([sys.executable, TOOL, "-i", clean, "-o", spoiled, "--kind", kind,
+                tool = TOOL3 if name in THREE_D else TOOL
+                subprocess.run([sys.executable, tool, "-i", clean, "-o", spoiled, "--kind", kind,
                                 "--count", str(count), "--seed", str(args.seed)], check=True, capture_output=True)
                 side = json.load(open(spoiled + ".outliers.json"))
                 injected = {o["edge_index"] for o in side["outliers"]}
@@ -172,7 +177,9 @@ def main():
                        f"{s['chi2'] / optimum:.3f} | {r['total_s']:.2f} | {base['total_s']:.2f} | "
                        f"{r['total_s'] / base['total_s']:.2f} | {r['p99_us'] / 1e3:.1f} | {r['max_us'] / 1e3:.0f} | "
                        f"{' / '.join(map(str, (r.get('engine') or {}).get('decision_lag_keyframes') or ['–']))} |")
-                for method in ("gnc", "dcs") if args.peers else ():
+                if args.peers and name in THREE_D:
+                    row += " – | – | – | – | – | – | – | – |"
+                for method in ("gnc", "dcs") if args.peers and name not in THREE_D else ():
                     g = peer(spoiled, method, args.peer_timeout)
                     if g is None:
                         row += f" failed or timed out ({args.peer_timeout:.0f} s) | – | – | – |"
