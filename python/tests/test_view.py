@@ -16,7 +16,7 @@ from foxglove_schemas_protobuf.PosesInFrame_pb2 import PosesInFrame
 from foxglove_schemas_protobuf.SceneUpdate_pb2 import SceneUpdate
 
 from conftest import REPO, clean_env, dataset, slamd_bin
-from viewing import (ALL_TOPICS, GRAPH, TRAJECTORY, Chromium, Viewer, assert_trajectory_is_the_snapshot,
+from viewing import (ALL_TOPICS, GRAPH, HEALTH, TRAJECTORY, Chromium, Viewer, assert_trajectory_is_the_snapshot,
                      drawn_segments, foxglove_messages, off_segments, quiet_snapshot, recorded, replay,
                      screenshot_path, with_outliers)
 
@@ -33,10 +33,12 @@ def test_foxglove_clients_and_the_recording_show_the_daemons_map(daemons, tmp_pa
     assert "off" in switches.states, "the filter switched none of 100 wrong loop closures off"
 
     def current(m):
+        # the viewer has drawn the snapshot's version, not an older one of
+        # the same size
         t = PosesInFrame.FromString(m[TRAJECTORY])
-        return len(t.poses) == len(snap.ids)
+        return len(t.poses) == len(snap.ids) and json.loads(m[HEALTH])["version"] == snap.version
 
-    got = asyncio.run(foxglove_messages(viewer.ws, {TRAJECTORY, GRAPH}, current))
+    got = asyncio.run(foxglove_messages(viewer.ws, {TRAJECTORY, GRAPH, HEALTH}, current))
     assert_trajectory_is_the_snapshot(PosesInFrame.FromString(got[TRAJECTORY]), snap)
     update = SceneUpdate.FromString(got[GRAPH])
     drawn, counts = drawn_segments(update, line=2)
@@ -45,9 +47,9 @@ def test_foxglove_clients_and_the_recording_show_the_daemons_map(daemons, tmp_pa
 
     assert viewer.stop() == 0
     rec = recorded(tmp_path / "run.mcap")
-    assert {TRAJECTORY, GRAPH, "/slamd/newest", "/slamd/health", "/slamd/map"} <= rec.keys()
+    assert {TRAJECTORY, GRAPH, HEALTH, "/slamd/newest", "/slamd/map"} <= rec.keys()
     assert_trajectory_is_the_snapshot(PosesInFrame.FromString(rec[TRAJECTORY][-1]), snap)
-    health = json.loads(rec["/slamd/health"][-1])
+    health = json.loads(rec[HEALTH][-1])
     assert health["keyframes"] == 3500 and health["version"] == snap.version
 
 
@@ -162,7 +164,7 @@ def test_bad_clients_do_not_stop_the_view(daemons, tmp_path):
 def test_the_foxglove_layout_shows_the_views_topics_in_every_panel():
     layout = json.loads((REPO / "docs" / "foxglove-layout.json").read_text())
     topics = set(re.findall(r"/slamd/[a-z]+", json.dumps(layout["configById"])))
-    assert {TRAJECTORY, GRAPH, "/slamd/location", "/slamd/health"} <= topics <= ALL_TOPICS
+    assert {TRAJECTORY, GRAPH, HEALTH, "/slamd/location"} <= topics <= ALL_TOPICS
 
     def panels(node):
         return [node] if isinstance(node, str) else panels(node["first"]) + panels(node["second"])

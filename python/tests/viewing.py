@@ -30,8 +30,9 @@ from conftest import clean_env
 
 TRAJECTORY = "/slamd/trajectory"
 GRAPH = "/slamd/graph"
-ALL_TOPICS = {TRAJECTORY, GRAPH, "/slamd/newest", "/slamd/location", "/slamd/locations",
-              "/slamd/health", "/slamd/map"}
+HEALTH = "/slamd/health"
+ALL_TOPICS = {TRAJECTORY, GRAPH, HEALTH, "/slamd/newest", "/slamd/location", "/slamd/locations",
+              "/slamd/map"}
 
 
 class Viewer:
@@ -75,14 +76,17 @@ class Viewer:
         return self.proc.poll() is None
 
 
-def quiet_snapshot(namespace, quiet_s=1.5):
-    """The daemon's last snapshot and switches, once it has published
-    nothing new for `quiet_s` (background re-solves have landed)."""
+def quiet_snapshot(namespace, quiet_s=1.5, settle_s=60.0):
+    """The daemon's settled snapshot (`settling` false: input answered,
+    re-solves landed, the judge done) and switches, once it has published
+    nothing newer for `quiet_s`."""
     snapshots = slamd.Snapshots(namespace)
     last = snapshots.wait(10.0)
     assert last is not None, "the daemon published no snapshot"
-    while (newer := snapshots.wait(quiet_s)) is not None:
-        last = newer
+    deadline = time.monotonic() + settle_s
+    while (newer := snapshots.wait(quiet_s)) is not None or last.settling:
+        assert time.monotonic() < deadline, f"the daemon did not settle within {settle_s} s"
+        last = newer or last
     return last, snapshots.switches()
 
 
