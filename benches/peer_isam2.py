@@ -68,18 +68,23 @@ def read_graph(path):
 
 
 def isam2_replay(path):
+    """iSAM2 over a 2-D file, one update and one whole estimate per keyframe;
+    (final estimate, stats). Every 1000 keyframes a progress line on stderr
+    says how far it got (what a timed-out run reports)."""
     import gtsam
     import numpy as np
 
     edges = read_graph(path)
     isam = gtsam.ISAM2(gtsam.ISAM2Params())
-    estimate = {0: gtsam.Pose2()}
+    result = gtsam.Values()
+    result.insert(0, gtsam.Pose2())
     latencies, by_key = [], {}
     for e in edges:
         by_key.setdefault(max(e[0], e[1]), []).append(e)
     start = time.perf_counter()
     first = True
-    for k in sorted(by_key):
+    keys = sorted(by_key)
+    for n, k in enumerate(keys):
         t0 = time.perf_counter()
         graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
         if first:
@@ -90,15 +95,20 @@ def isam2_replay(path):
             omega = np.array([[I[0], I[1], I[2]], [I[1], I[3], I[4]], [I[2], I[4], I[5]]])
             z = gtsam.Pose2(x, y, th)
             graph.add(gtsam.BetweenFactorPose2(i, j, z, gtsam.noiseModel.Gaussian.Information(omega)))
-            if j not in estimate and not values.exists(j) and i in estimate:
-                values.insert(j, estimate[i].compose(z))
-            elif i not in estimate and not values.exists(i) and j in estimate:
-                values.insert(i, estimate[j].compose(z.inverse()))
+            # the new end starts from the last estimate of the other, looked
+            # up in GTSAM's Values (a Python copy of the whole estimate per
+            # keyframe would cost more than iSAM2 itself)
+            if not result.exists(j) and not values.exists(j) and result.exists(i):
+                values.insert(j, result.atPose2(i).compose(z))
+            elif not result.exists(i) and not values.exists(i) and result.exists(j):
+                values.insert(i, result.atPose2(j).compose(z.inverse()))
         isam.update(graph, values)
         result = isam.calculateEstimate()
-        estimate = {key: result.atPose2(key) for key in result.keys()}
         latencies.append((time.perf_counter() - t0) * 1e6)
+        if (n + 1) % 1000 == 0:
+            print(f"keyframe {n + 1} of {len(keys)} at {time.perf_counter() - start:.1f} s", file=sys.stderr, flush=True)
     total = time.perf_counter() - start
+    estimate = {key: result.atPose2(key) for key in result.keys()}
     latencies.sort()
     pct = lambda q: latencies[round((len(latencies) - 1) * q)]
     return estimate, {"p50_us": pct(0.5), "p99_us": pct(0.99), "max_us": latencies[-1], "total_s": total}
@@ -274,7 +284,8 @@ def main():
     ap.add_argument("--3d", dest="three_d", action="store_true",
                     help="the 3-D table: FILEs (default: " + ", ".join(DEFAULT3) + ") under DATASETS/3d")
     ap.add_argument("--peer-timeout", type=float, default=0, metavar="S",
-                    help="3-D: give up on iSAM2 after S seconds, reading the file included (default 0: never)")
+                    help="give up on iSAM2 after S seconds, reading the file included, and report the "
+                         "keyframe it had reached (default 0: never)")
     ap.add_argument("--isam2-factorization", choices=["cholesky", "qr"], default="cholesky",
                     help="3-D: ISAM2Params factorization (default: GTSAM's default, cholesky)")
     ap.add_argument("--no-qr-retry", action="store_true",
@@ -315,7 +326,12 @@ def main():
         path = name if os.path.exists(name) else os.path.join(DATA, name)
         out, mine_rss = run_child([args.slamd, "replay", path, "--embedded", "--json"])
         mine = json.loads(out)
-        out, peer_rss = run_child([sys.executable, __file__, "--isam2-child", path])
+        try:
+            out, peer_rss = run_child([sys.executable, __file__, "--isam2-child", path],
+                                      timeout=args.peer_timeout)
+        except ChildFailed as e:
+            print(f"| {os.path.basename(path)} | {mine['total_s']:.2f} | iSAM2 {e} |", flush=True)
+            continue
         peer = json.loads(out)
         scored = json.loads(subprocess.run([args.slamd, "eval", path, peer["poses"], "--json"], check=True, capture_output=True, text=True).stdout)
         os.unlink(peer["poses"])
