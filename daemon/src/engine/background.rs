@@ -28,8 +28,11 @@ pub struct Background<P: EnginePose = Pose2> {
     /// The next op's number.
     seq: u64,
     /// Keyframes below this index are known to the running job's hints
-    /// (handed over, or forwarded after an update).
+    /// (handed over, or forwarded after an update)...
     hinted: usize,
+    /// ...but for these, which had not joined yet (a keyframe whose edges
+    /// come in a later batch): their hints go once they join.
+    unhinted: Vec<usize>,
 }
 
 impl<P: EnginePose> Default for Background<P> {
@@ -40,6 +43,7 @@ impl<P: EnginePose> Default for Background<P> {
             log: Vec::new(),
             seq: 0,
             hinted: 0,
+            unhinted: Vec::new(),
         }
     }
 }
@@ -66,17 +70,22 @@ impl<P: EnginePose> Background<P> {
         self.seq += 1;
     }
 
-    /// Forwards `state`'s estimates of the keyframes added since the last
-    /// call (those that joined) to the running job.
+    /// Forwards `state`'s estimates of the keyframes that joined since the
+    /// last call to the running job.
     pub fn forward_estimates(&mut self, state: &State<P>) {
         let Some(job) = &self.job else {
             return;
         };
         let (model, estimate) = (&state.model, state.estimate());
         let n = model.graph.len();
-        for k in (self.hinted..n).filter(|&k| model.joined(k)) {
-            job.hint(k, estimate[k]);
-        }
+        self.unhinted.extend(self.hinted..n);
+        self.unhinted.retain(|&k| {
+            let joined = model.joined(k);
+            if joined {
+                job.hint(k, estimate[k]);
+            }
+            !joined
+        });
         self.hinted = n;
     }
 
@@ -97,6 +106,10 @@ impl<P: EnginePose> Background<P> {
         }
         self.log.clear();
         self.hinted = state.model.graph.len();
+        // without its hint such a keyframe would join the job's catch-up at
+        // its input guess (dead-reckoned by the frontend, metres off late in
+        // a long run) and bend the map there
+        self.unhinted = (0..self.hinted).filter(|&k| !state.model.joined(k)).collect();
         let waker = self.waker.clone();
         self.job = Some(Job::spawn(model, estimate, config.clone(), polish, waker));
     }
@@ -181,4 +194,47 @@ pub fn catch_up<P: EnginePose>(
         "Re-solve caught up."
     );
     Some((state, base))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::engine::state::tests::{keyframe, odometry};
+
+    /// A keyframe whose edges come after it has not joined when a job
+    /// starts, or when the estimates after its update are forwarded; its
+    /// hint goes once it joins (without one it would join the job's
+    /// catch-up at its input guess).
+    #[test]
+    fn a_keyframe_that_joins_late_is_hinted_once_it_joins() {
+        let config = EngineConfig::default();
+        let step = Pose2::new(1.0, 0.0, 0.0);
+        let mut state = State::new(&config);
+        for k in 0..3 {
+            state.replay(&keyframe(k), 0.0).unwrap();
+            if k > 0 {
+                state.replay(&odometry(k - 1, k, step), 0.0).unwrap();
+            }
+        }
+        state.replay(&keyframe(3), 0.0).unwrap();
+        state.solve(0.0).unwrap();
+        let mut background = Background::default();
+        background.start(&state, &config, Polish::None, &[]);
+        assert_eq!(background.unhinted, vec![3]);
+
+        state.replay(&keyframe(4), 0.0).unwrap();
+        state.solve(0.0).unwrap();
+        background.forward_estimates(&state);
+        assert_eq!(background.unhinted, vec![3, 4], "neither has joined");
+
+        state.replay(&odometry(2, 3, step), 0.0).unwrap();
+        state.solve(0.0).unwrap();
+        background.forward_estimates(&state);
+        assert_eq!(background.unhinted, vec![4], "3 joined and was hinted");
+
+        state.replay(&odometry(3, 4, step), 0.0).unwrap();
+        state.solve(0.0).unwrap();
+        background.forward_estimates(&state);
+        assert!(background.unhinted.is_empty());
+    }
 }

@@ -458,8 +458,7 @@ impl<P: EnginePose> Engine<P> {
     /// Whether the estimate's χ² is above `ratio` times its linear
     /// model's plus `slack` (never for a ratio of 0).
     fn beyond(&self, ratio: f64, slack: f64) -> bool {
-        let predicted = self.state.predicted_chi2();
-        ratio > 0.0 && self.state.chi2() > ratio * predicted.max(0.0) + slack
+        off_model(&self.state, ratio, slack)
     }
 
     /// Past `relinearise_ratio`: relinearises inline (a running
@@ -508,6 +507,12 @@ impl<P: EnginePose> Engine<P> {
     fn keyframe_count(&self) -> usize {
         self.state.model.graph.keyframes().len()
     }
+}
+
+/// Whether `state`'s χ² is above `ratio` times its linear model's plus
+/// `slack` (never for a ratio of 0).
+fn off_model<P: EnginePose>(state: &State<P>, ratio: f64, slack: f64) -> bool {
+    ratio > 0.0 && state.chi2() > ratio * state.predicted_chi2().max(0.0) + slack
 }
 
 /// The χ² a relinearisation must gain at least: below it, a gap between

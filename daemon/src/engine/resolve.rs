@@ -78,7 +78,10 @@ impl<P: EnginePose> Job<P> {
                 // the daemon's engine thread may hold a reserved core; a
                 // re-solve belongs on the others
                 crate::affinity::run_in_background();
-                if let Some(outcome) = run(model, &estimate, &config, polish, &ops_rx, &stopped) {
+                if let Some(mut outcome) = run(model, &estimate, &config, polish, &ops_rx, &stopped) {
+                    if !stopped.load(Ordering::Relaxed) {
+                        outcome.state = outcome.state.map(|s| relinearised(s, &config));
+                    }
                     if done_tx.send(outcome).is_ok() {
                         if let Some(wake) = wake {
                             wake();
@@ -137,6 +140,37 @@ impl<P: EnginePose> Drop for Job<P> {
     fn drop(&mut self) {
         self.stop.store(true, Ordering::Relaxed);
     }
+}
+
+/// Relinearisations a re-solve may make before handing over.
+const RELINEARISATIONS: usize = 2;
+
+/// `state`, relinearised at its estimate and refactorised while its χ²
+/// sits past the foreground's relinearisation check (at most
+/// [`RELINEARISATIONS`] times, and only while that lowers it), so that the
+/// foreground does not do it inline once the state swaps in. A polish
+/// leaves a long chain of keyframes whose loop closures are still pending
+/// (the judge behind) one Gauss–Newton step from where the step's
+/// linearisation holds: a small rotation at its base moves its far end
+/// tens of metres, and the keyframes caught up meet it there.
+fn relinearised<P: EnginePose>(mut state: State<P>, config: &EngineConfig) -> State<P> {
+    for _ in 0..RELINEARISATIONS {
+        if !super::off_model(&state, config.relinearise_ratio, super::RELINEARISE_SLACK) {
+            break;
+        }
+        let fresh = rebuild::rebuild(state.model().clone(), state.estimate(), Polish::None, config);
+        let Ok(mut fresh) = fresh else { break };
+        if fresh.solve(config.wildfire_threshold).is_err() || fresh.chi2() >= state.chi2() {
+            break;
+        }
+        tracing::debug!(
+            chi2 = fresh.chi2(),
+            predicted = fresh.predicted_chi2(),
+            "Re-solve relinearised before handing over."
+        );
+        state = fresh;
+    }
+    state
 }
 
 /// Passes over the queued ops a re-solve makes before handing over.
@@ -213,4 +247,63 @@ pub fn run<P: EnginePose>(
         seconds,
         polish,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::engine::state::tests::keyframe;
+    use crate::engine::Op;
+    use crate::synthetic::{generate, WorldParams};
+    use slamd_protocol::codec::Origin;
+
+    /// A synthetic world streamed into a state that never relinearises
+    /// ends past the foreground's relinearisation check (its loop closures
+    /// pulled the map far from where it was linearised). Relinearised
+    /// before it is handed over, it is within the check, its χ² lower; a
+    /// state within the check is handed over as it is.
+    #[test]
+    fn a_state_off_its_linear_model_is_relinearised_before_it_is_handed_over() {
+        let config = EngineConfig::default();
+        let world = generate(&WorldParams {
+            poses: 1000,
+            ..WorldParams::default()
+        });
+        let mut state = State::new(&config);
+        let mut edges = (0..world.graph.edges().len()).peekable();
+        for k in 0..world.graph.len() {
+            state
+                .replay(&keyframe(k as u64), config.wildfire_threshold)
+                .unwrap();
+            while let Some(e) =
+                edges.next_if(|&e| world.graph.edges()[e].from.max(world.graph.edges()[e].to) <= k)
+            {
+                let op = Op::Edge(world.graph.edge_input(e), Origin::LOCAL);
+                state.replay(&op, config.wildfire_threshold).unwrap();
+            }
+        }
+        state.solve(config.wildfire_threshold).unwrap();
+        let (ratio, slack) = (config.relinearise_ratio, super::super::RELINEARISE_SLACK);
+        let off = |s: &State| super::super::off_model(s, ratio, slack);
+        assert!(
+            off(&state),
+            "χ² {} against {}",
+            state.chi2(),
+            state.predicted_chi2()
+        );
+
+        let before = state.chi2();
+        let handed = relinearised(state, &config);
+        assert!(handed.chi2() < before, "χ² {before} → {}", handed.chi2());
+        assert!(
+            !off(&handed),
+            "χ² {} against {}",
+            handed.chi2(),
+            handed.predicted_chi2()
+        );
+
+        let at = handed.chi2();
+        let again = relinearised(handed, &config);
+        assert_eq!(again.chi2(), at);
+    }
 }
