@@ -178,11 +178,20 @@ fn two_frontends_interleave_edges() {
     // the snapshot of fresh input says the daemon still works on it; the
     // last one, once it rests, says the map is settled
     assert_eq!(header.settling, 1);
-    // once the daemon is at rest (no snapshot for a second), a subscriber
-    // that comes then and waits gets the latest snapshot within a tick
-    let mut newest = header.version;
-    while let Some(s) = snaps.wait(Duration::from_secs(1)).unwrap() {
-        newest = s.header().version;
+    // once the daemon is at rest (its settled map out, then no snapshot
+    // for a second), a subscriber that comes then and waits gets the
+    // latest snapshot within a tick
+    let (mut newest, mut settled) = (header.version, false);
+    let deadline = Instant::now() + Duration::from_secs(60);
+    loop {
+        match snaps.wait(Duration::from_secs(1)).unwrap() {
+            Some(s) => {
+                newest = s.header().version;
+                settled = s.header().settling == 0;
+            }
+            None if settled => break,
+            None => assert!(Instant::now() < deadline, "no settled map within 60 s"),
+        }
     }
     let mut late = Snapshots::open(&daemon.namespace).unwrap();
     let start = Instant::now();
