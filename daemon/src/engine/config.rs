@@ -22,9 +22,10 @@ pub struct EngineConfig {
     /// Gauss–Newton iteration; 0: never). Default 50.
     pub refresh_every_edges: usize,
     /// Re-solve in the background when the factor holds this many times
-    /// the entries it had when last fresh; while a re-solve runs, or with
-    /// everything inline (`background` off), refactorise inline with a
-    /// fresh ordering instead (0: neither). Default 2.
+    /// the entries per column it had when last fresh (fill-in: a map grown
+    /// by odometry alone grows its factor in proportion); while a re-solve
+    /// runs, or with everything inline (`background` off), refactorise
+    /// inline with a fresh ordering instead (0: neither). Default 2.
     pub resolve_fill_ratio: f64,
     /// Run re-solves on a background thread; else inline, blocking.
     /// Default true.

@@ -388,4 +388,9 @@ impl<P: EnginePose> GaussNewton<P> {
     pub fn factor_nnz(&self) -> usize {
         self.chol.factor().nnz()
     }
+
+    /// The factor's columns (scalar variables).
+    pub fn factor_columns(&self) -> usize {
+        self.chol.factor().len()
+    }
 }

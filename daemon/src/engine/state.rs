@@ -494,6 +494,11 @@ impl<P: EnginePose> State<P> {
         self.gn.factor_nnz()
     }
 
+    /// The factor's columns (scalar variables).
+    pub fn factor_columns(&self) -> usize {
+        self.gn.factor_columns()
+    }
+
     /// A copy of the model, for a rebuild elsewhere.
     pub fn model(&self) -> &Model<P> {
         &self.model
