@@ -64,44 +64,46 @@ pub(crate) fn parse_pose_table<P: RigidMotion>(
     Ok(poses)
 }
 
-/// A pose whose ground truth can be read.
+/// A pose whose ground truth can be read from a noise-free graph file.
 pub trait TruthPose: RigidMotion {
-    /// The truth in the file at `path`, keyed by keyframe id.
-    fn read_ground_truth(path: &Path) -> Result<HashMap<KeyframeId, Self>, ReadError>;
+    /// The poses the noise-free graph file at `path` gives, keyed by
+    /// keyframe id.
+    fn truth_from_graph(path: &Path) -> Result<HashMap<KeyframeId, Self>, ReadError>;
 }
 
-/// Reads ground truth: in the plane a pose table, or a noise-free graph
-/// file whose edges are composed along a spanning tree from the first
-/// keyframe (odometry first); in space a noise-free 3-D graph file, its
+/// Reads ground truth, in the plane and in space alike: a pose table
+/// ([`read_pose_table`]'s layouts), or a noise-free graph file (its first
+/// record starts with a tag): in the plane its edges composed along a
+/// spanning tree from the first keyframe (odometry first); in space its
 /// vertices where it has any, else its edges composed along a spanning
 /// tree.
 pub fn read_ground_truth<P: TruthPose>(path: &Path) -> Result<HashMap<KeyframeId, P>, ReadError> {
-    P::read_ground_truth(path)
+    let text = std::fs::read_to_string(path).map_err(|e| ReadError::io(path, e))?;
+    let first_tag = text
+        .lines()
+        .map(|l| l.split('#').next().unwrap_or("").trim())
+        .find(|l| !l.is_empty())
+        .and_then(|l| l.split_whitespace().next())
+        .unwrap_or("");
+    if first_tag.chars().next().is_some_and(|c| c.is_ascii_alphabetic()) {
+        P::truth_from_graph(path)
+    } else {
+        parse_pose_table(path, &text)
+    }
 }
 
 impl TruthPose for Pose2 {
-    fn read_ground_truth(path: &Path) -> Result<HashMap<KeyframeId, Pose2>, ReadError> {
-        let text = std::fs::read_to_string(path).map_err(|e| ReadError::io(path, e))?;
-        let first_tag = text
-            .lines()
-            .map(|l| l.split('#').next().unwrap_or("").trim())
-            .find(|l| !l.is_empty())
-            .and_then(|l| l.split_whitespace().next())
-            .unwrap_or("");
-        if first_tag.chars().next().is_some_and(|c| c.is_ascii_alphabetic()) {
-            let graph = read_graph(path)?;
-            let poses = graph
-                .compose_spanning_tree()
-                .map_err(|e| ReadError::graph(path, e))?;
-            Ok(by_id(&graph, poses))
-        } else {
-            parse_pose_table(path, &text)
-        }
+    fn truth_from_graph(path: &Path) -> Result<HashMap<KeyframeId, Pose2>, ReadError> {
+        let graph = read_graph(path)?;
+        let poses = graph
+            .compose_spanning_tree()
+            .map_err(|e| ReadError::graph(path, e))?;
+        Ok(by_id(&graph, poses))
     }
 }
 
 impl TruthPose for Pose3 {
-    fn read_ground_truth(path: &Path) -> Result<HashMap<KeyframeId, Pose3>, ReadError> {
+    fn truth_from_graph(path: &Path) -> Result<HashMap<KeyframeId, Pose3>, ReadError> {
         let graph = super::read_graph::<Pose3>(path)?;
         let poses = graph.initial_guess().map_err(|e| ReadError::graph(path, e))?;
         Ok(by_id(&graph, poses))
@@ -134,6 +136,24 @@ mod tests {
             err.to_string(),
             "gt.txt:2: pose line needs `id x y theta` or `x y theta`, found 2 fields"
         );
+    }
+
+    #[test]
+    fn spatial_ground_truth_may_be_a_pose_table() {
+        let path = std::env::temp_dir().join(format!("slamd-truth3-{}.txt", std::process::id()));
+        std::fs::write(
+            &path,
+            "# id x y z qx qy qz qw\n0 0 0 0 0 0 0 1\n7 1 2 3 0 0 1 0\n",
+        )
+        .unwrap();
+        let truth = read_ground_truth::<Pose3>(&path);
+        std::fs::remove_file(&path).unwrap();
+        let truth = truth.unwrap();
+        assert_eq!(truth.len(), 2);
+        assert_eq!(truth[&7].translation.as_slice(), &[1.0, 2.0, 3.0]);
+        // a half turn about z: the quaternion (0, 0, 1, 0)
+        let q = truth[&7].rotation;
+        assert!((q.k - 1.0).abs() < 1e-15 && q.w.abs() < 1e-15, "{q:?}");
     }
 
     #[test]
