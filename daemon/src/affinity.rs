@@ -75,12 +75,11 @@ pub const BACKGROUND_NICE: i32 = 10;
 pub fn yield_to_foreground() {
     #[cfg(target_os = "linux")]
     {
-        // SAFETY: gettid has no preconditions; setpriority on this thread's
-        // id changes only its own nice value, raising it needs no privilege.
+        let nice = (current_nice() + BACKGROUND_NICE).min(19);
+        // SAFETY: setpriority on this thread's id changes only its own
+        // nice value; raising it needs no privilege.
         unsafe {
-            let tid = libc::syscall(libc::SYS_gettid) as libc::id_t;
-            let nice = libc::getpriority(libc::PRIO_PROCESS, tid);
-            libc::setpriority(libc::PRIO_PROCESS, tid, (nice + BACKGROUND_NICE).min(19));
+            libc::setpriority(libc::PRIO_PROCESS, thread_id(), nice);
         }
     }
 }
@@ -89,11 +88,19 @@ pub fn yield_to_foreground() {
 pub fn current_nice() -> i32 {
     #[cfg(target_os = "linux")]
     {
-        // SAFETY: as in `yield_to_foreground`; getpriority only reads.
-        unsafe { libc::getpriority(libc::PRIO_PROCESS, libc::syscall(libc::SYS_gettid) as libc::id_t) }
+        // SAFETY: getpriority only reads.
+        unsafe { libc::getpriority(libc::PRIO_PROCESS, thread_id()) }
     }
     #[cfg(not(target_os = "linux"))]
     0
+}
+
+/// The calling thread's kernel id, which `getpriority` and `setpriority`
+/// take for one thread.
+#[cfg(target_os = "linux")]
+fn thread_id() -> libc::id_t {
+    // SAFETY: gettid has no preconditions.
+    unsafe { libc::syscall(libc::SYS_gettid) as libc::id_t }
 }
 
 /// CPUs online. Not `available_parallelism`, which counts the calling
