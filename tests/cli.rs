@@ -128,6 +128,20 @@ fn malformed_file_gives_line_and_reason_and_exit_code_2() {
     assert!(err.contains(":3: EDGE_SE2: non-finite number `inf`"), "{err}");
 }
 
+/// An edge to a keyframe the file never declares: the line and the id,
+/// said once.
+#[test]
+fn an_edge_to_an_unknown_keyframe_is_named_once() {
+    let path = std::env::temp_dir().join(format!("slamd-unknown-{}.g2o", std::process::id()));
+    let text = "VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 1 0 0\nEDGE_SE2 0 1 1 0 0 1 0 0 1 0 1\nEDGE_SE2 4 1 1 0 0 1 0 0 1 0 1\n";
+    std::fs::write(&path, text).expect("write");
+    let (code, _, err) = run_slamd(&["solve", path.to_str().expect("utf-8")]);
+    let _ = std::fs::remove_file(&path);
+    assert_eq!(code, 2);
+    assert_eq!(err.matches("unknown keyframe 4").count(), 1, "{err}");
+    assert!(err.contains(":4: edge refers to unknown keyframe 4"), "{err}");
+}
+
 /// A square with a self-edge, an information that is not positive
 /// definite and a repeated vertex: refused as it is, solved with
 /// `--skip-invalid` (by `solve` and `replay`), which names what it left out.

@@ -73,12 +73,6 @@ impl fmt::Display for ReadError {
     }
 }
 
-impl std::error::Error for ReadError {
-    fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
-        match &self.kind {
-            ReadErrorKind::Io(e) => Some(e),
-            ReadErrorKind::Graph(e) => Some(e),
-            ReadErrorKind::Malformed(_) | ReadErrorKind::Map(_) => None,
-        }
-    }
-}
+/// No `source`: the message already ends with the cause's, and a chain
+/// printed whole (`{:#}`) would say it twice.
+impl std::error::Error for ReadError {}
