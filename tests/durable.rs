@@ -135,6 +135,76 @@ fn a_daemon_continues_a_saved_map_to_the_optimum() {
     assert_eq!((counters.keyframes, counters.rejected), (3500, 0));
 }
 
+/// A map made from a file: Manhattan's first 1,750 keyframes solved in
+/// batch and written as a saved map (`slamd solve --out FILE.map`), served
+/// with `slamd run --map --state`, restarted from the state directory,
+/// and continued with the rest of the file (`slamd replay --from 1750`):
+/// the replay ends at the whole file's optimum, 146.077, with all 3,500
+/// keyframes.
+#[test]
+fn a_solved_map_restarts_from_its_state_directory_and_continues() {
+    let dir = fresh_dir("durable-solved-map");
+    std::fs::create_dir_all(&dir).unwrap();
+    let file = dataset("manhattanolson3500_g2oversion.g2o");
+    let prefix = dir.join("prefix.g2o");
+    let kept: Vec<String> = std::fs::read_to_string(&file)
+        .unwrap()
+        .lines()
+        .filter(|line| {
+            let t: Vec<&str> = line.split_whitespace().collect();
+            let below = |i: usize| {
+                t.get(i)
+                    .and_then(|x| x.parse::<usize>().ok())
+                    .is_some_and(|k| k < 1750)
+            };
+            match t.first() {
+                Some(&"VERTEX_SE2") => below(1),
+                Some(&"EDGE_SE2") => below(1) && below(2),
+                _ => true,
+            }
+        })
+        .map(str::to_string)
+        .collect();
+    std::fs::write(&prefix, kept.join("\n") + "\n").unwrap();
+    let map = dir.join("prefix.map");
+    let (p, m) = (prefix.to_str().unwrap(), map.to_str().unwrap());
+    let (code, _, err) = slamd_tests::run_slamd(&["solve", p, "--polish", "--out", m]);
+    assert_eq!(code, 0, "{err}");
+    let saved = MapFile::<Pose2>::read(&map).expect("a saved map");
+    assert_eq!(saved.keyframes.len(), 1750);
+
+    let state = dir.join("state");
+    let state = state.to_str().unwrap();
+    let namespace = format!("slamd-test-{}-solved-map", std::process::id());
+    let served = |args: &[&str]| {
+        let daemon = Daemon::serve(&namespace, args, &[]);
+        // the restored map is out once the status counts its keyframes
+        let deadline = std::time::Instant::now() + Duration::from_secs(30);
+        loop {
+            let status =
+                slamd_tests::run_json(&["status", "--namespace", &namespace, "--json", "--wait", "5"]);
+            if status["keyframes"].as_u64() == Some(1750) {
+                break daemon;
+            }
+            assert!(std::time::Instant::now() < deadline, "{status}");
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    };
+    assert!(served(&["--map", m, "--state", state]).stop().success());
+    let daemon = served(&["--state", state]);
+    let out = Command::new(slamd_bin())
+        .args(["replay", file.to_str().unwrap(), "--namespace", &namespace])
+        .args(["--from", "1750", "--json", "--timeout", "60"])
+        .output()
+        .expect("run the replay");
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON");
+    assert_eq!(v["keyframes"].as_u64(), Some(3500));
+    let chi2 = v["chi2"].as_f64().unwrap();
+    assert!((chi2 - 146.077).abs() < 1e-3, "final χ² {chi2}");
+    assert!(daemon.stop().success());
+}
+
 /// A tmpfs mounted for a test, unmounted when it goes.
 struct Tmpfs(PathBuf);
 

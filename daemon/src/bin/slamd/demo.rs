@@ -220,7 +220,7 @@ fn show<P: DemoPose>(
             GpsParams::default().sigma
         );
     }
-    let out = replay(graph, &fixes, &mut sink, &[], false, |_| bar.inc(1))?;
+    let out = replay(graph, &fixes, &mut sink, &[], false, 0, |_| bar.inc(1))?;
     bar.finish_and_clear();
     drop(sink);
 

@@ -26,8 +26,9 @@ pub struct SolveOpts {
     #[arg(long)]
     pub ground_truth: Option<PathBuf>,
     /// Write the result: `.g2o` as a graph, `.tum` and `.kitti` as evo reads
-    /// them (TUM's time is the keyframe id), anything else as `id x y theta`
-    /// (in 3-D `id x y z qx qy qz qw`).
+    /// them (TUM's time is the keyframe id), `.map` as a saved map that
+    /// `slamd run --map` continues, anything else as `id x y theta` (in 3-D
+    /// `id x y z qx qy qz qw`).
     #[arg(long)]
     pub out: Option<PathBuf>,
     /// Draw the estimate over the ground truth and the initial guess.
@@ -85,7 +86,7 @@ pub fn run(opts: SolveOpts) -> anyhow::Result<()> {
     let ate = truth.as_ref().and_then(|t| ate(&graph, &sol.poses, t));
 
     if let Some(out) = &opts.out {
-        write_result(out, &graph, &sol.poses)?;
+        write_result(out, &graph, &sol.poses, sol.switches.as_deref())?;
     }
     let covariance_seconds = opts
         .covariances
@@ -267,12 +268,22 @@ pub fn print_result<P: LiePose>(sol: &BatchSolution<P>, robust: &Rejected, ate: 
 }
 
 /// Writes `poses` to `out` by its extension: a trajectory (`.tum`,
-/// `.kitti`), g2o (`.g2o`), else a pose table.
+/// `.kitti`), g2o (`.g2o`), a saved map (`.map`: what `slamd run --map`
+/// continues, every edge at its switch in `switches`, else on), else a
+/// pose table.
 pub fn write_result<P: io::G2oPose>(
     out: &std::path::Path,
     graph: &PoseGraph<P>,
     poses: &[P],
+    switches: Option<&[f64]>,
 ) -> anyhow::Result<()> {
+    if out.extension().is_some_and(|e| e == "map") {
+        let mut map = slamd::store::MapFile::solved(graph, poses);
+        for (edge, &s) in map.edges.iter_mut().zip(switches.unwrap_or_default()) {
+            edge.switch = s;
+        }
+        return std::fs::write(out, map.encode()).with_context(|| format!("writing {}", out.display()));
+    }
     let file = std::fs::File::create(out).with_context(|| format!("creating {}", out.display()))?;
     let mut w = std::io::BufWriter::new(file);
     if let Some(layout) = io::Trajectory::of(out) {
@@ -330,7 +341,7 @@ fn run_spatial(opts: &SolveOpts, graph: &PoseGraph<Pose3>, skipped: serde_json::
     let sol = solve_batch(graph, &options).with_context(|| format!("solving {}", opts.file.display()))?;
     let ate = truth.as_ref().and_then(|t| ate(graph, &sol.poses, t));
     if let Some(out) = &opts.out {
-        write_result(out, graph, &sol.poses)?;
+        write_result(out, graph, &sol.poses, sol.switches.as_deref())?;
     }
     let covariance_seconds = opts
         .covariances

@@ -63,9 +63,15 @@ pub struct ReplayOpts {
     /// Turn the outlier filter off (--embedded).
     #[arg(long)]
     pub no_filter: bool,
+    /// Start at the keyframe of this index (0-based, in time order), with
+    /// the edges whose newer end it is: the daemon already holds the ones
+    /// before (`slamd run --map` of the file's first keyframes).
+    #[arg(long, default_value_t = 0)]
+    pub from: usize,
     /// Write the result: `.g2o` as a graph, `.tum` and `.kitti` as evo reads
-    /// them (TUM's time is the keyframe id), anything else as `id x y theta`
-    /// (in 3-D `id x y z qx qy qz qw`).
+    /// them (TUM's time is the keyframe id), `.map` as a saved map that
+    /// `slamd run --map` continues, anything else as `id x y theta` (in 3-D
+    /// `id x y z qx qy qz qw`).
     #[arg(long)]
     pub out: Option<PathBuf>,
     /// Write one line per keyframe: `k latency_us`, and with `--embedded`
@@ -174,16 +180,18 @@ pub fn replay<P: RigidMotion>(
     sink: &mut dyn Sink<P>,
     checkpoints: &[usize],
     record_work: bool,
+    from: usize,
     mut progress: impl FnMut(usize),
 ) -> anyhow::Result<Outcome<P>> {
     let mut latencies = Vec::with_capacity(graph.len());
     let mut work = Vec::new();
     let mut before = FactorWork::default();
     let mut checked = Vec::new();
-    let steps = stream(graph, fixes);
+    let mut steps = stream(graph, fixes);
+    steps.drain(..from.min(steps.len()));
     let sent: Vec<usize> = steps.iter().flat_map(|s| s.file_index.iter().copied()).collect();
     let start = Instant::now();
-    for (k, step) in steps.iter().enumerate() {
+    for (k, step) in (from..).zip(&steps) {
         latencies.extend(sink.keyframe(k, step)?);
         // counting the factor's entries walks its columns: only on request
         if let Some(stats) = record_work.then(|| sink.engine_stats()).flatten() {
@@ -265,6 +273,7 @@ pub fn run(opts: ReplayOpts) -> anyhow::Result<()> {
         sink.as_mut(),
         &checkpoints,
         opts.trace.is_some(),
+        opts.from,
         |_| {},
     )?;
     let enu_rmse = gps.as_ref().and_then(|g| {
@@ -284,7 +293,7 @@ pub fn run(opts: ReplayOpts) -> anyhow::Result<()> {
             .with_context(|| format!("writing {}", path.display()))?;
     }
     if let Some(path) = &opts.out {
-        crate::solve::write_result(path, &graph, &out.poses)?;
+        crate::solve::write_result(path, &graph, &out.poses, out.switches.as_deref())?;
     }
     let georeferenced = !out.enu.is_empty();
     let report = report(&graph, out, sink.as_ref(), truth.as_ref())?;
@@ -338,6 +347,9 @@ fn checkpoints(opts: &ReplayOpts, keyframes: usize) -> Vec<usize> {
 fn sink<P: ReplayPose>(opts: &ReplayOpts, config: &Config) -> anyhow::Result<Box<dyn Sink<P>>> {
     if opts.rate.is_some_and(|r| r.is_nan() || r <= 0.0) {
         bail!("--rate must be > 0");
+    }
+    if opts.from > 0 && opts.embedded {
+        bail!("--from continues a daemon's map (`slamd run --map`); it does not take --embedded");
     }
     if opts.embedded {
         let engine = Engine::<P>::create(engine_config(opts, config));

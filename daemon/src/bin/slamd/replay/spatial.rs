@@ -25,9 +25,9 @@ pub fn run(
         .transpose()?;
     let checkpoints = super::checkpoints(opts, graph.len());
     let mut sink = super::sink::<Pose3>(opts, config)?;
-    let out = replay(&graph, &[], sink.as_mut(), &checkpoints, false, |_| {})?;
+    let out = replay(&graph, &[], sink.as_mut(), &checkpoints, false, opts.from, |_| {})?;
     if let Some(path) = &opts.out {
-        crate::solve::write_result(path, &graph, &out.poses)?;
+        crate::solve::write_result(path, &graph, &out.poses, out.switches.as_deref())?;
     }
     let mode = sink.mode();
     let report = super::report(&graph, out, sink.as_ref(), truth.as_ref())?;
