@@ -136,3 +136,55 @@ fn a_loop_closure_waits_out_of_the_estimate_until_it_is_decided() {
         .unwrap();
     assert!(!engine.is_pending(trusted));
 }
+
+/// A map saved with a wrong loop closure still pending: restored, it is
+/// pending again; the judge, restored on its own thread, decides it off
+/// once the stream goes on, with the switch an inline restore decides.
+#[test]
+fn a_restored_judge_decides_what_was_pending() {
+    let step = Pose2::new(1.0, 0.0, 0.0);
+    let info = Information::identity().scaled(100.0);
+    // on its thread, the judge decides before the next keyframe at the
+    // earliest: the map saved after this update holds it pending
+    let mut engine = Engine::new(EngineConfig::default());
+    for k in 0..20u64 {
+        engine.add_keyframe(k, None).unwrap();
+        if k > 0 {
+            engine
+                .add_edge(EdgeInput::new(k - 1, k, step, info, EdgeKind::Odometry))
+                .unwrap();
+        }
+        engine.update();
+    }
+    let z = Pose2::new(10.0, 30.0, 1.0);
+    let wrong = engine
+        .add_edge(EdgeInput::new(5, 15, z, info, EdgeKind::LoopClosure))
+        .unwrap();
+    engine.update();
+    assert!(engine.is_pending(wrong));
+    let map = engine.map();
+    assert!(map.edges[wrong].pending);
+    drop(engine);
+    let decide = |config: EngineConfig| {
+        let mut engine = Engine::restore(config, &map, false).expect("restores");
+        assert!(engine.is_pending(wrong), "pending again after the restore");
+        engine.add_keyframe(20, None).unwrap();
+        engine
+            .add_edge(EdgeInput::new(19, 20, step, info, EdgeKind::Odometry))
+            .unwrap();
+        let deadline = Instant::now() + Duration::from_secs(20);
+        while engine.is_pending(wrong) {
+            assert!(Instant::now() < deadline, "never decided");
+            std::thread::sleep(Duration::from_millis(5));
+            engine.update();
+        }
+        engine.switches()[wrong]
+    };
+    let inline = decide(EngineConfig {
+        background: false,
+        ..EngineConfig::default()
+    });
+    let threaded = decide(EngineConfig::default());
+    assert!(inline < REJECTED_BELOW, "switch {inline}");
+    assert_eq!(threaded.to_bits(), inline.to_bits());
+}

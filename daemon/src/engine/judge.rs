@@ -184,11 +184,35 @@ impl<P: EnginePose> Judge<P> {
     /// `published` (`NaN`: pending), on its own thread when `threaded`.
     pub fn new(engine: Engine<P>, published: Vec<f64>, threaded: bool) -> Self {
         debug_assert!(!engine.config.background && engine.config.outliers.enabled);
-        let mut bench = Bench::new(engine, published);
+        let bench = Bench::new(engine, published);
         if !threaded {
             return Judge::Inline(Box::new(bench), Vec::new());
         }
         let stats = bench.engine.stats();
+        Self::spawn(stats, move || Some(bench))
+    }
+
+    /// A judge on its own thread whose engine `build` makes there first
+    /// (a restore: two whole factorisations of a large map would hold the
+    /// publishing engine's first snapshot back). Asks queue meanwhile. If
+    /// `build` fails the judge is gone: loop closures stay pending and the
+    /// error is logged.
+    pub fn restoring(
+        build: impl FnOnce() -> Result<Engine<P>, super::EngineError> + Send + 'static,
+        published: Vec<f64>,
+    ) -> Self {
+        Self::spawn(EngineStats::default(), move || match build() {
+            Ok(engine) => Some(Bench::new(engine, published)),
+            Err(e) => {
+                tracing::error!(error = %e, "The outlier filter's judge could not restore the map; loop closures stay pending.");
+                None
+            }
+        })
+    }
+
+    /// The judge's thread over the bench `bench` makes, `stats` its
+    /// counters until its first decisions.
+    fn spawn(stats: EngineStats, bench: impl FnOnce() -> Option<Bench<P>> + Send + 'static) -> Self {
         let (asks, asked) = channel::unbounded::<Ask<P>>();
         let (decided, decisions) = channel::unbounded();
         let stop = Arc::new(AtomicBool::new(false));
@@ -201,6 +225,9 @@ impl<P: EnginePose> Judge<P> {
             .spawn(move || {
                 // the daemon's engine thread may hold a reserved core
                 crate::affinity::run_in_background();
+                let Some(mut bench) = bench() else {
+                    return;
+                };
                 for ask in asked {
                     if stopped.load(Ordering::Relaxed) {
                         return;
@@ -328,12 +355,29 @@ impl<P: EnginePose> Engine<P> {
     /// `engine` publishing with `judge` deciding its loop closures.
     pub(super) fn beside(mut engine: Self, judge: Self) -> Self {
         let threaded = engine.config.background;
-        engine.state.model.judged = true;
-        let published = (engine.state.model.edges.iter().enumerate())
-            .map(|(e, s)| if engine.is_pending(e) { f64::NAN } else { s.switch })
-            .collect();
+        let published = engine.judged_switches();
         engine.judge = Some(Judge::new(judge, published, threaded));
         engine
+    }
+
+    /// `engine` publishing with a judge that `build` restores on its own
+    /// thread ([`Judge::restoring`]).
+    pub(super) fn beside_restoring(
+        mut engine: Self,
+        build: impl FnOnce() -> Result<Self, super::EngineError> + Send + 'static,
+    ) -> Self {
+        let published = engine.judged_switches();
+        engine.judge = Some(Judge::restoring(build, published));
+        engine
+    }
+
+    /// Marks the model judged; returns the switches it publishes (`NaN`:
+    /// pending), which the judge's first decisions are measured against.
+    fn judged_switches(&mut self) -> Vec<f64> {
+        self.state.model.judged = true;
+        (self.state.model.edges.iter().enumerate())
+            .map(|(e, s)| if self.is_pending(e) { f64::NAN } else { s.switch })
+            .collect()
     }
 
     /// Takes the judge's decisions: each loop closure's switch as it

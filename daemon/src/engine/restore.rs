@@ -210,11 +210,19 @@ impl<P: EnginePose> Engine<P> {
         // the judge re-solves before it decides what was pending
         let pending: Vec<usize> = (0..map.edges.len()).filter(|&e| map.edges[e].pending).collect();
         let judge_polish = polish || !pending.is_empty();
-        let judge = Self::restore_whole(judge::judge_config(&config), map, judge_polish, false)?;
         let mut engine = Self::restore_whole(judge::published_config(&config), map, polish, true)?;
         let keyframes = engine.keyframe_count();
         engine.undecided = pending.into_iter().map(|e| (e, Some(keyframes))).collect();
-        Ok(Self::beside(engine, judge))
+        let judge_config = judge::judge_config(&config);
+        if !config.background {
+            let judge = Self::restore_whole(judge_config, map, judge_polish, false)?;
+            return Ok(Self::beside(engine, judge));
+        }
+        // the judge's own factorisation runs on its thread, off the path
+        // to the first snapshot: a restart waits for one, not two
+        let saved = map.clone();
+        let build = move || Self::restore_whole(judge_config, &saved, judge_polish, false);
+        Ok(Self::beside_restoring(engine, build))
     }
 
     /// [`Self::restore`] for an engine that applies its own filter, if on.
