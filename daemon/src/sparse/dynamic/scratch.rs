@@ -32,10 +32,7 @@ impl<T: Clone + Default> WalkScratch<T> {
     /// Scratch for a factor of `n` variables.
     pub(super) fn new(n: usize) -> Self {
         Self {
-            // one allocation each, not clones of one: a zeroed allocation
-            // is pages the kernel maps on first touch, and a walk touches
-            // few (a million-keyframe factor's 288 MB were copied in full)
-            work: (0..MAX_RANK).map(|_| vec![T::default(); n]).collect(),
+            work: vec![vec![T::default(); n]; MAX_RANK],
             rows: Vec::new(),
             vals: Vec::new(),
             extra: Vec::new(),
