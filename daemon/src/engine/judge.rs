@@ -189,19 +189,20 @@ impl<P: EnginePose> Judge<P> {
             return Judge::Inline(Box::new(bench), Vec::new());
         }
         let stats = bench.engine.stats();
-        Self::spawn(stats, move || Some(bench))
+        Self::spawn(stats, false, move || Some(bench))
     }
 
     /// A judge on its own thread whose engine `build` makes there first
     /// (a restore: two whole factorisations of a large map would hold the
-    /// publishing engine's first snapshot back). Asks queue meanwhile. If
-    /// `build` fails the judge is gone: loop closures stay pending and the
-    /// error is logged.
+    /// publishing engine's first snapshot back). Asks queue meanwhile, and
+    /// the judge counts as busy (the map is not settled). If `build` fails
+    /// the judge is gone: loop closures stay pending and the error is
+    /// logged.
     pub fn restoring(
         build: impl FnOnce() -> Result<Engine<P>, super::EngineError> + Send + 'static,
         published: Vec<f64>,
     ) -> Self {
-        Self::spawn(EngineStats::default(), move || match build() {
+        Self::spawn(EngineStats::default(), true, move || match build() {
             Ok(engine) => Some(Bench::new(engine, published)),
             Err(e) => {
                 tracing::error!(error = %e, "The outlier filter's judge could not restore the map; loop closures stay pending.");
@@ -211,8 +212,13 @@ impl<P: EnginePose> Judge<P> {
     }
 
     /// The judge's thread over the bench `bench` makes, `stats` its
-    /// counters until its first decisions.
-    fn spawn(stats: EngineStats, bench: impl FnOnce() -> Option<Bench<P>> + Send + 'static) -> Self {
+    /// counters until its first decisions; `building` counts making it as
+    /// an ask answered once it is made.
+    fn spawn(
+        stats: EngineStats,
+        building: bool,
+        bench: impl FnOnce() -> Option<Bench<P>> + Send + 'static,
+    ) -> Self {
         let (asks, asked) = channel::unbounded::<Ask<P>>();
         let (decided, decisions) = channel::unbounded();
         let stop = Arc::new(AtomicBool::new(false));
@@ -225,7 +231,11 @@ impl<P: EnginePose> Judge<P> {
             .spawn(move || {
                 // the daemon's engine thread may hold a reserved core
                 crate::affinity::run_in_background();
-                let Some(mut bench) = bench() else {
+                let bench = bench();
+                if building {
+                    answers.fetch_add(1, Ordering::Release);
+                }
+                let Some(mut bench) = bench else {
                     return;
                 };
                 for ask in asked {
@@ -253,7 +263,7 @@ impl<P: EnginePose> Judge<P> {
             stats,
             wake,
             stop,
-            asked: 0,
+            asked: u64::from(building),
             answered,
         })
     }
