@@ -90,11 +90,14 @@ fn the_filter_decides_alike_however_late_its_judge_runs() {
     }
 }
 
-#[test]
-fn a_loop_closure_waits_out_of_the_estimate_until_it_is_decided() {
-    let mut engine = Engine::new(EngineConfig::default());
-    let step = Pose2::new(1.0, 0.0, 0.0);
-    let info = Information::identity().scaled(100.0);
+/// The unit step of [`corridor`] and the information of its edges.
+fn step() -> (Pose2, Information) {
+    (Pose2::new(1.0, 0.0, 0.0), Information::identity().scaled(100.0))
+}
+
+/// A straight corridor of 20 keyframes a step apart, each updated.
+fn corridor(engine: &mut Engine) {
+    let (step, info) = step();
     for k in 0..20u64 {
         engine.add_keyframe(k, None).unwrap();
         if k > 0 {
@@ -104,6 +107,28 @@ fn a_loop_closure_waits_out_of_the_estimate_until_it_is_decided() {
         }
         engine.update();
     }
+}
+
+/// The corridor goes on to keyframe 20; returns once `edge` is decided.
+fn go_on_until_decided(engine: &mut Engine, edge: usize) {
+    let (step, info) = step();
+    engine.add_keyframe(20, None).unwrap();
+    engine
+        .add_edge(EdgeInput::new(19, 20, step, info, EdgeKind::Odometry))
+        .unwrap();
+    let deadline = Instant::now() + Duration::from_secs(20);
+    while engine.is_pending(edge) {
+        assert!(Instant::now() < deadline, "never decided");
+        std::thread::sleep(Duration::from_millis(5));
+        engine.update();
+    }
+}
+
+#[test]
+fn a_loop_closure_waits_out_of_the_estimate_until_it_is_decided() {
+    let mut engine = Engine::new(EngineConfig::default());
+    let (_, info) = step();
+    corridor(&mut engine);
     let straight: Vec<Pose2> = engine.snapshot().poses().map(|(_, p)| p).collect();
     // 30 m off a straight corridor: wrong
     let z = Pose2::new(10.0, 30.0, 1.0);
@@ -117,16 +142,7 @@ fn a_loop_closure_waits_out_of_the_estimate_until_it_is_decided() {
     assert_eq!(report.decided, 0);
     let unmoved: Vec<Pose2> = engine.snapshot().poses().map(|(_, p)| p).collect();
     assert_eq!(unmoved, straight, "a pending loop closure moved the map");
-    engine.add_keyframe(20, None).unwrap();
-    engine
-        .add_edge(EdgeInput::new(19, 20, step, info, EdgeKind::Odometry))
-        .unwrap();
-    let deadline = Instant::now() + Duration::from_secs(10);
-    while engine.is_pending(wrong) {
-        assert!(Instant::now() < deadline, "never decided");
-        std::thread::sleep(Duration::from_millis(5));
-        engine.update();
-    }
+    go_on_until_decided(&mut engine, wrong);
     assert!(engine.switches()[wrong] < REJECTED_BELOW);
     assert_eq!(engine.snapshot().pending, 0);
     assert_eq!(engine.decision_lags(), &[1]);
@@ -142,20 +158,11 @@ fn a_loop_closure_waits_out_of_the_estimate_until_it_is_decided() {
 /// once the stream goes on, with the switch an inline restore decides.
 #[test]
 fn a_restored_judge_decides_what_was_pending() {
-    let step = Pose2::new(1.0, 0.0, 0.0);
-    let info = Information::identity().scaled(100.0);
+    let (_, info) = step();
     // on its thread, the judge decides before the next keyframe at the
     // earliest: the map saved after this update holds it pending
     let mut engine = Engine::new(EngineConfig::default());
-    for k in 0..20u64 {
-        engine.add_keyframe(k, None).unwrap();
-        if k > 0 {
-            engine
-                .add_edge(EdgeInput::new(k - 1, k, step, info, EdgeKind::Odometry))
-                .unwrap();
-        }
-        engine.update();
-    }
+    corridor(&mut engine);
     let z = Pose2::new(10.0, 30.0, 1.0);
     let wrong = engine
         .add_edge(EdgeInput::new(5, 15, z, info, EdgeKind::LoopClosure))
@@ -168,16 +175,7 @@ fn a_restored_judge_decides_what_was_pending() {
     let decide = |config: EngineConfig| {
         let mut engine = Engine::restore(config, &map, false).expect("restores");
         assert!(engine.is_pending(wrong), "pending again after the restore");
-        engine.add_keyframe(20, None).unwrap();
-        engine
-            .add_edge(EdgeInput::new(19, 20, step, info, EdgeKind::Odometry))
-            .unwrap();
-        let deadline = Instant::now() + Duration::from_secs(20);
-        while engine.is_pending(wrong) {
-            assert!(Instant::now() < deadline, "never decided");
-            std::thread::sleep(Duration::from_millis(5));
-            engine.update();
-        }
+        go_on_until_decided(&mut engine, wrong);
         engine.switches()[wrong]
     };
     let inline = decide(EngineConfig {
