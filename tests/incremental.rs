@@ -338,3 +338,35 @@ fn the_first_keyframe_stays_at_its_guess() {
     let error = max_pose_error(&[poses[1].1], &[start.compose(&step)]);
     assert!(error < 1e-12, "{error:e}");
 }
+
+/// Between re-solves the background thread relinearises and
+/// refactorises (a refresh, every `refresh_every_edges` new edges while
+/// it is free). Intel streamed with the stream waiting for each
+/// background job to swap in, so that machine load cannot starve one:
+/// refreshes swap in, and the stream still ends at the optimum.
+#[test]
+fn a_stream_refreshes_in_the_background() {
+    let g = read("intel_sesync.g2o");
+    let mut config = EngineConfig::default();
+    config.outliers.enabled = false;
+    let (mut engine, _) = replay(&g, config, |_, engine| {
+        let deadline = std::time::Instant::now() + std::time::Duration::from_secs(60);
+        while engine.resolving() {
+            assert!(
+                std::time::Instant::now() < deadline,
+                "a background job never swapped in"
+            );
+            std::thread::sleep(std::time::Duration::from_millis(1));
+            engine.update();
+        }
+    });
+    let stats = engine.stats();
+    assert!(
+        stats.refreshes >= 10,
+        "{} refreshes over {} edges",
+        stats.refreshes,
+        g.edges().len()
+    );
+    let chi2 = engine.resolve_now().chi2;
+    assert!((chi2 - 45.005).abs() < 1e-3, "final χ² {chi2}");
+}
