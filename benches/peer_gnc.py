@@ -12,36 +12,24 @@ runs GNC in a child process. It returns the poses file (`id x y theta`, in
 3-D `id x y z qx qy qz qw`), the loop closures it holds off (weight below
 0.5, as slamd counts a switch) and its seconds, or a reason.
 """
-import math, multiprocessing, os, queue as queue_module, subprocess, tempfile, time
+import multiprocessing, os, queue as queue_module, subprocess, tempfile, time
 
 from common import BIN
-from peer_gtsam import read_3d, read_g2o
+from peer_gtsam import pose2_graph, pose3_graph, read_3d, read_g2o
 
 
 def _child(path, three, out, answer):
     try:
         import gtsam
-        import numpy as np
 
-        graph = gtsam.NonlinearFactorGraph()
-        known, loops = [], 0
         if three:
             vertices, edges = read_3d(path)
-            for n, (i, j, z, omega) in enumerate(edges):
-                graph.add(gtsam.BetweenFactorPose3(i, j, z, gtsam.noiseModel.Gaussian.Information(omega)))
-                known += [n] if abs(i - j) == 1 else []
-            first = min(vertices)
-            prior = gtsam.noiseModel.Diagonal.Variances(np.array([1e-6, 1e-6, 1e-6, 1e-4, 1e-4, 1e-4]))
-            graph.add(gtsam.PriorFactorPose3(first, vertices[first], prior))
+            graph = pose3_graph(vertices, edges)
         else:
             vertices, edges = read_g2o(path)
-            for n, (i, j, x, y, th, I) in enumerate(edges):
-                omega = np.array([[I[0], I[1], I[2]], [I[1], I[3], I[4]], [I[2], I[4], I[5]]])
-                graph.add(gtsam.BetweenFactorPose2(i, j, gtsam.Pose2(x, y, th), gtsam.noiseModel.Gaussian.Information(omega)))
-                known += [n] if abs(i - j) == 1 else []
-            first = min(vertices)
-            sigmas = gtsam.noiseModel.Diagonal.Sigmas(np.array([1e-6, 1e-6, 1e-8]))
-            graph.add(gtsam.PriorFactorPose2(first, gtsam.Pose2(*vertices[first]), sigmas))
+            graph = pose2_graph(vertices, edges)
+        # the odometry, and the prior after the edges
+        known = [n for n, (i, j, *_) in enumerate(edges) if abs(i - j) == 1]
         known.append(len(edges))
         loops = len(edges) + 1 - len(known)
         t0 = time.perf_counter()

@@ -87,17 +87,41 @@ def read_g2o(path):
     return vertices, edges
 
 
-def run_gtsam(path, repeat):
+def pose2_graph(vertices, edges):
+    """GTSAM's graph of read_g2o's `edges`, every one as written, and a
+    tight prior on the first vertex."""
     import gtsam
     import numpy as np
 
-    vertices, edges = read_g2o(path)
     graph = gtsam.NonlinearFactorGraph()
     for i, j, x, y, th, I in edges:
         omega = np.array([[I[0], I[1], I[2]], [I[1], I[3], I[4]], [I[2], I[4], I[5]]])
         graph.add(gtsam.BetweenFactorPose2(i, j, gtsam.Pose2(x, y, th), gtsam.noiseModel.Gaussian.Information(omega)))
     first = min(vertices)
     graph.add(gtsam.PriorFactorPose2(first, gtsam.Pose2(*vertices[first]), gtsam.noiseModel.Diagonal.Sigmas(np.array([1e-6, 1e-6, 1e-8]))))
+    return graph
+
+
+def pose3_graph(vertices, edges):
+    """GTSAM's graph of read_3d's `edges`, every one as written, and a
+    tight prior on the first vertex."""
+    import gtsam
+    import numpy as np
+
+    graph = gtsam.NonlinearFactorGraph()
+    for i, j, z, omega in edges:
+        graph.add(gtsam.BetweenFactorPose3(i, j, z, gtsam.noiseModel.Gaussian.Information(omega)))
+    first = min(vertices)
+    prior = gtsam.noiseModel.Diagonal.Variances(np.array([1e-6, 1e-6, 1e-6, 1e-4, 1e-4, 1e-4]))
+    graph.add(gtsam.PriorFactorPose3(first, vertices[first], prior))
+    return graph
+
+
+def run_gtsam(path, repeat):
+    import gtsam
+
+    vertices, edges = read_g2o(path)
+    graph = pose2_graph(vertices, edges)
     initial = gtsam.Values()
     for k, p in vertices.items():
         initial.insert(k, gtsam.Pose2(*p))
@@ -174,12 +198,7 @@ def gtsam3_child(path, repeat, poses_path, queue):
         import numpy as np
 
         vertices, edges = read_3d(path)
-        graph = gtsam.NonlinearFactorGraph()
-        for i, j, z, omega in edges:
-            graph.add(gtsam.BetweenFactorPose3(i, j, z, gtsam.noiseModel.Gaussian.Information(omega)))
-        first = min(vertices)
-        prior = gtsam.noiseModel.Diagonal.Variances(np.array([1e-6, 1e-6, 1e-6, 1e-4, 1e-4, 1e-4]))
-        graph.add(gtsam.PriorFactorPose3(first, vertices[first], prior))
+        graph = pose3_graph(vertices, edges)
         params = gtsam.LevenbergMarquardtParams()
         params.setMaxIterations(100)
         best, result, iters = float("inf"), None, None

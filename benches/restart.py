@@ -16,8 +16,9 @@ outlier filter off (`engine.outliers.enabled = false`: no judge, whose
 copy of the map doubles memory). Prints one table. The binary
 is target/release/slamd (build it first) or $SLAMD_BIN.
 """
-import argparse, json, os, shutil, signal, subprocess, tempfile, time
+import argparse, json, os, shutil, subprocess, tempfile, time
 from common import BIN
+from journal_cost import status, stop
 
 
 def timed(args):
@@ -47,9 +48,8 @@ def serve(ns, args, filtered):
     d = subprocess.Popen([BIN, "run", "--namespace", ns, *args], env=env,
                          stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     while True:
-        out = subprocess.run([BIN, "status", "--namespace", ns, "--json", "--wait", "5"],
-                             capture_output=True, text=True)
-        if out.returncode == 0 and json.loads(out.stdout)["keyframes"] > 0:
+        st = status(ns, 5)
+        if st and st["keyframes"] > 0:
             return d, time.time() - t0
         if d.poll() is not None:
             raise SystemExit(f"slamd run exited {d.returncode}")
@@ -59,11 +59,6 @@ def serve(ns, args, filtered):
 def peak_mib(pid):
     with open(f"/proc/{pid}/status") as f:
         return next(int(l.split()[1]) for l in f if l.startswith("VmHWM")) / 1024
-
-
-def stop(d):
-    d.send_signal(signal.SIGTERM)
-    return d.wait()
 
 
 def main():
