@@ -202,6 +202,17 @@ fn a_solved_map_restarts_from_its_state_directory_and_continues() {
     assert_eq!(v["keyframes"].as_u64(), Some(3500));
     let chi2 = v["chi2"].as_f64().unwrap();
     assert!((chi2 - 146.077).abs() < 1e-3, "final χ² {chi2}");
+    // past the file's end there is nothing to continue with
+    let (code, _, err) = slamd_tests::run_slamd(&[
+        "replay",
+        file.to_str().unwrap(),
+        "--namespace",
+        &namespace,
+        "--from",
+        "3500",
+    ]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("--from 3500: the file has 3500 keyframes"), "{err}");
     assert!(daemon.stop().success());
 }
 

@@ -188,7 +188,13 @@ pub fn replay<P: RigidMotion>(
     let mut before = FactorWork::default();
     let mut checked = Vec::new();
     let mut steps = stream(graph, fixes);
-    steps.drain(..from.min(steps.len()));
+    if from > 0 && from >= steps.len() {
+        bail!(
+            "--from {from}: the file has {} keyframes, so nothing is left to send",
+            steps.len()
+        );
+    }
+    steps.drain(..from);
     let sent: Vec<usize> = steps.iter().flat_map(|s| s.file_index.iter().copied()).collect();
     let start = Instant::now();
     for (k, step) in (from..).zip(&steps) {
