@@ -21,7 +21,9 @@ keyframe, the filter on with its defaults. Per run:
 - total replay time, the outlier-free replay's in the same run and their
   ratio, and p99 and max latency per keyframe;
 - keyframes from a loop closure's arrival to the filter's decision on it
-  (median / 99th percentile / largest), where slamd reports it. A replay
+  (median / 99th percentile / largest), where slamd reports it;
+- the most snapshots any wrong loop closure weighed in with (its switch at
+  least 0.5 in the published estimate), and how many wrong ones ever did. A replay
   streams as fast as the publishing engine takes keyframes (unless
   `--rate` paces it), so these measure how far the filter's judge runs
   behind it.
@@ -47,6 +49,15 @@ DATASETS = {  # name: (file, ground truth)
     "sphere": ("3d/sphere2500.g2o", "3d/groundtruth/sphere2500_groundtruth_isam.txt"),
 }
 THREE_D = {"sphere"}  # spoiled by benches/add_outliers3.py; no peers
+
+
+def weighed_in(r, injected):
+    """The most snapshots a wrong loop closure weighed in (switch ≥ 0.5) and how many ever did."""
+    counts = r.get("weighted_snapshots")
+    if counts is None:
+        return "–"
+    wrong = [counts[e] for e in injected]
+    return f"{max(wrong)} / {sum(1 for n in wrong if n > 0)}"
 
 
 def score(binary, clean, poses, gt):
@@ -147,9 +158,9 @@ def main():
         args.extra += ["--rate", str(args.rate)]
     tmp = tempfile.mkdtemp(prefix="slamd-outliers-")
     print(f"slamd replay --embedded {' '.join(args.extra)} (filter defaults); seed {args.seed}")
-    print("| dataset | outliers | precision | recall | ATE (m) | ATE clean (m) | χ² true / optimum | total (s) | clean (s) | total / clean | p99 (ms) | max (ms) | decided after (keyframes) |"
+    print("| dataset | outliers | precision | recall | ATE (m) | ATE clean (m) | χ² true / optimum | total (s) | clean (s) | total / clean | p99 (ms) | max (ms) | decided after (keyframes) | wrong ones weighed in: most snapshots / how many |"
           + (" GNC P / R | GNC ATE (m) | GNC χ² true / optimum | GNC (s) | LM+DCS P / R | LM+DCS ATE (m) | LM+DCS χ² true / optimum | LM+DCS (s) |" if args.peers else ""))
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|" + ("---|" * 8 if args.peers else ""))
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|" + ("---|" * 8 if args.peers else ""))
     for name in args.datasets:
         file, gt = DATASETS[name]
         clean = os.path.join(DATA, file)
@@ -176,7 +187,8 @@ def main():
                 row = (f"| {name} | {count} {kind} | {precision:.3f} | {recall:.3f} | {ate} | {ate0} | "
                        f"{s['chi2'] / optimum:.3f} | {r['total_s']:.2f} | {base['total_s']:.2f} | "
                        f"{r['total_s'] / base['total_s']:.2f} | {r['p99_us'] / 1e3:.1f} | {r['max_us'] / 1e3:.0f} | "
-                       f"{' / '.join(map(str, (r.get('engine') or {}).get('decision_lag_keyframes') or ['–']))} |")
+                       f"{' / '.join(map(str, (r.get('engine') or {}).get('decision_lag_keyframes') or ['–']))} | "
+                       f"{weighed_in(r, injected)} |")
                 if args.peers and name in THREE_D:
                     row += " – | – | – | – | – | – | – | – |"
                 for method in ("gnc", "dcs") if args.peers and name not in THREE_D else ():

@@ -58,6 +58,21 @@ fn replay_json_reports_the_required_fields_and_the_engines_counters() {
     // the machine; that they happen is `incremental::a_stream_refreshes_in_the_background`
     let _ = count("refreshes");
     assert_eq!(count("recoveries"), 0, "no downdate fails on clean data: {v}");
+    // the snapshots each edge weighed in: one per keyframe's update from
+    // the one that sent it, and the settled map; odometry 0 → 1 comes with
+    // keyframe 1 of 1,728
+    let weighted: Vec<u64> = (v["weighted_snapshots"].as_array())
+        .expect("weighted_snapshots")
+        .iter()
+        .map(|n| n.as_u64().expect("a count"))
+        .collect();
+    assert_eq!(weighted.len(), 2512);
+    assert_eq!((weighted[0], weighted[1]), (1728, 1727));
+    // no loop closure of the clean file ends off, so each weighs in at
+    // least the settled map; a pending one weighs in none
+    assert!(weighted.iter().all(|&n| (1..=1728).contains(&n)), "{weighted:?}");
+    let held = weighted.iter().filter(|&&n| n == 1).count();
+    assert!(held < 2512, "{held} edges weighed in only the settled map");
     // one line per keyframe with edges: k, latency, walked, solved, nnz
     let lines = std::fs::read_to_string(&trace).expect("the trace");
     let _ = std::fs::remove_file(&trace);

@@ -419,6 +419,12 @@ impl<P: EnginePose> Engine<P> {
         self.state.model.edges.iter().map(|s| s.switch).collect()
     }
 
+    /// The switch of edge `e` (see [`Self::switches`]); `None` past the
+    /// last edge.
+    pub fn switch(&self, e: usize) -> Option<f64> {
+        self.state.model.edges.get(e).map(|s| s.switch)
+    }
+
     /// Who sent edge `e` ([`Origin::LOCAL`] for one added without an
     /// origin, or past the end).
     pub fn edge_origin(&self, e: usize) -> Origin {

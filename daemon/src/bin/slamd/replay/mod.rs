@@ -171,6 +171,9 @@ pub struct Outcome<P = Pose2> {
     /// Keyframes from each loop closure's arrival to the outlier filter's
     /// decision on it (embedded only).
     pub decision_lags: Vec<f64>,
+    /// How many snapshots each edge weighed in with a switch of at least
+    /// 0.5, in file order (embedded only).
+    pub weighted: Option<Vec<u32>>,
 }
 
 /// Streams `graph` into `sink`; `progress` is told of each keyframe.
@@ -221,13 +224,9 @@ pub fn replay<P: RigidMotion>(
     let total_s = ready.duration_since(start).as_secs_f64();
     let closing_s = ready.duration_since(closing).as_secs_f64();
     let enu = sink.enu()?;
-    let switches = sink.switches().map(|sw| {
-        let mut by_file = vec![1.0; graph.edges().len()];
-        for (n, &e) in sent.iter().enumerate() {
-            by_file[e] = sw[n];
-        }
-        by_file
-    });
+    let edges = graph.edges().len();
+    let switches = (sink.switches()).map(|sw| in_file_order(&sent, edges, &sw, 1.0));
+    let weighted = (sink.weighted_snapshots()).map(|w| in_file_order(&sent, edges, &w, 0));
     let poses = graph
         .keyframes()
         .iter()
@@ -252,7 +251,18 @@ pub fn replay<P: RigidMotion>(
         poses,
         checked,
         decision_lags: sink.decision_lags().into_iter().map(f64::from).collect(),
+        weighted,
     })
+}
+
+/// Values of the edges in the order `sent` (file indices) rearranged in
+/// file order, `fill` where an edge was not sent.
+fn in_file_order<T: Copy>(sent: &[usize], edges: usize, values: &[T], fill: T) -> Vec<T> {
+    let mut by_file = vec![fill; edges];
+    for (&e, &v) in sent.iter().zip(values) {
+        by_file[e] = v;
+    }
+    by_file
 }
 
 pub fn run(opts: ReplayOpts) -> anyhow::Result<()> {
@@ -362,7 +372,7 @@ fn sink<P: ReplayPose>(opts: &ReplayOpts, config: &Config) -> anyhow::Result<Box
         let pace = opts
             .rate
             .map(|hz| (Instant::now(), Duration::from_secs_f64(1.0 / hz)));
-        return Ok(Box::new(EmbeddedSink(engine, pace)));
+        return Ok(Box::new(EmbeddedSink(engine, pace, Vec::new())));
     }
     let timeout = Duration::from_secs_f64(opts.timeout);
     let daemon = DaemonSink::<P>::connect(&config.namespace, config, timeout, opts.rate)?;

@@ -26,6 +26,9 @@ pub struct Report {
     pub ratios: Vec<(usize, f64)>,
     pub robust: Rejected,
     pub switched: bool,
+    /// How many snapshots each edge weighed in (switch ≥ 0.5), in file
+    /// order (embedded only).
+    pub weighted: Option<Vec<u32>>,
 }
 
 impl Report {
@@ -64,6 +67,7 @@ impl Report {
             switched: out.switches.is_some(),
             latency: Latency::of(out.latencies),
             decisions: Latency::of(out.decision_lags),
+            weighted: out.weighted,
         })
     }
 
@@ -110,6 +114,7 @@ impl Report {
             "loop_closures": self.robust.loop_closures,
             "switched_off": self.robust.rejected.len(),
             "rejected_edges": self.switched.then_some(&self.robust.rejected),
+            "weighted_snapshots": self.weighted,
         });
         if let (Some(v), serde_json::Value::Object(extra)) = (v.as_object_mut(), extra) {
             v.extend(extra);

@@ -8,6 +8,7 @@ use slamd::engine::{Engine, EnginePose, EngineStats};
 use slamd::geometry::Pose2;
 use slamd::graph::{KeyframeId, Pose3, RigidMotion};
 use slamd::ipc::{Frontend, Snapshots};
+use slamd::outliers::REJECTED_BELOW;
 use slamd_protocol::SnapshotHeader;
 use std::collections::{HashMap, VecDeque};
 use std::time::{Duration, Instant};
@@ -42,11 +43,19 @@ pub trait Sink<P: slamd::graph::RigidMotion = Pose2> {
     fn decision_lags(&self) -> Vec<u32> {
         Vec::new()
     }
+
+    /// For each edge in the order sent, how many snapshots it weighed in
+    /// with a switch of at least [`REJECTED_BELOW`] (embedded; else none).
+    fn weighted_snapshots(&self) -> Option<Vec<u32>> {
+        None
+    }
 }
 
 /// The engine in this process, fed as fast as it takes keyframes or, with
-/// a pace `(start, period)`, keyframe `k` at `start + k · period`.
-pub struct EmbeddedSink<P: EnginePose = Pose2>(pub Engine<P>, pub Option<(Instant, Duration)>);
+/// a pace `(start, period)`, keyframe `k` at `start + k · period`; the
+/// third field counts each edge's weighted snapshots (see
+/// [`Sink::weighted_snapshots`]).
+pub struct EmbeddedSink<P: EnginePose = Pose2>(pub Engine<P>, pub Option<(Instant, Duration)>, pub Vec<u32>);
 
 /// What a replay does per dimension: a snapshot's poses read as the
 /// dimension's poses.
@@ -68,6 +77,17 @@ impl ReplayPose for Pose3 {
     }
 }
 
+impl<P: EnginePose> EmbeddedSink<P> {
+    /// Counts the snapshot just published for each edge that weighs in it.
+    fn count_weighted(&mut self) {
+        let weighted = &mut self.2;
+        weighted.resize(self.0.graph().edges().len(), 0);
+        for (e, n) in weighted.iter_mut().enumerate() {
+            *n += u32::from(self.0.switch(e).is_some_and(|s| s >= REJECTED_BELOW));
+        }
+    }
+}
+
 impl<P: ReplayPose> Sink<P> for EmbeddedSink<P> {
     fn keyframe(&mut self, k: usize, step: &Step<P>) -> anyhow::Result<Vec<(usize, f64)>> {
         if let Some((start, period)) = self.1 {
@@ -85,6 +105,7 @@ impl<P: ReplayPose> Sink<P> for EmbeddedSink<P> {
             self.0.add_gps(*f)?;
         }
         self.0.update();
+        self.count_weighted();
         Ok(if step.edges.is_empty() {
             vec![]
         } else {
@@ -102,6 +123,8 @@ impl<P: ReplayPose> Sink<P> for EmbeddedSink<P> {
 
     fn finish(&mut self) -> anyhow::Result<(HashMap<KeyframeId, P>, usize, Instant)> {
         self.0.resolve_now();
+        // the settled map is published too
+        self.count_weighted();
         Ok((self.poses()?, self.0.stats().resolves, Instant::now()))
     }
 
@@ -123,6 +146,10 @@ impl<P: ReplayPose> Sink<P> for EmbeddedSink<P> {
 
     fn decision_lags(&self) -> Vec<u32> {
         self.0.decision_lags().to_vec()
+    }
+
+    fn weighted_snapshots(&self) -> Option<Vec<u32>> {
+        Some(self.2.clone())
     }
 }
 
