@@ -167,7 +167,7 @@ def main():
         gt = os.path.join(DATA, gt) if gt else None
         optimum = slamd("solve", clean, "--polish", "--json", binary=args.slamd)["chi2"]
         gt_args = ["--ground-truth", gt] if gt else []
-        base = slamd("replay", clean, "--embedded", "--json", *gt_args, *args.extra, binary=args.slamd)
+        base = slamd("replay", clean, "--embedded", "--json", "--weighted", *gt_args, *args.extra, binary=args.slamd)
         for kind in args.kinds:
             for count in args.counts:
                 spoiled = os.path.join(tmp, f"{name}-{kind}-{count}.g2o")
@@ -177,7 +177,8 @@ def main():
                 side = json.load(open(spoiled + ".outliers.json"))
                 injected = {o["edge_index"] for o in side["outliers"]}
                 poses = spoiled + ".poses"
-                r = slamd("replay", spoiled, "--embedded", "--json", "--out", poses, *gt_args, *args.extra, binary=args.slamd)
+                r = slamd("replay", spoiled, "--embedded", "--json", "--weighted", "--out", poses, *gt_args, *args.extra,
+                          binary=args.slamd)
                 caught = injected & set(r["rejected_edges"])
                 precision = len(caught) / max(1, len(r["rejected_edges"]))
                 recall = len(caught) / len(injected)

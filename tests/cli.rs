@@ -30,6 +30,7 @@ fn replay_json_reports_the_required_fields_and_the_engines_counters() {
         file.to_str().expect("utf-8"),
         "--embedded",
         "--json",
+        "--weighted",
         "--trace",
         trace.to_str().expect("utf-8"),
     ]);

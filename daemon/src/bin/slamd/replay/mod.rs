@@ -79,6 +79,12 @@ pub struct ReplayOpts {
     /// back-substitutions read, and the factor's entries after it.
     #[arg(long)]
     pub trace: Option<PathBuf>,
+    /// Count, per edge, the snapshots it weighs in with a switch of at
+    /// least 0.5 (`weighted_snapshots` in the JSON; --embedded): how long
+    /// a wrong loop closure stays in the published estimate. It reads
+    /// every switch after each keyframe's update, outside the latency.
+    #[arg(long)]
+    pub weighted: bool,
     #[command(flatten)]
     pub input: crate::input::InputOpts,
     /// Print one JSON object instead of a table.
@@ -372,7 +378,7 @@ fn sink<P: ReplayPose>(opts: &ReplayOpts, config: &Config) -> anyhow::Result<Box
         let pace = opts
             .rate
             .map(|hz| (Instant::now(), Duration::from_secs_f64(1.0 / hz)));
-        return Ok(Box::new(EmbeddedSink(engine, pace, Vec::new())));
+        return Ok(Box::new(EmbeddedSink(engine, pace, opts.weighted.then(Vec::new))));
     }
     let timeout = Duration::from_secs_f64(opts.timeout);
     let daemon = DaemonSink::<P>::connect(&config.namespace, config, timeout, opts.rate)?;

@@ -53,9 +53,13 @@ pub trait Sink<P: slamd::graph::RigidMotion = Pose2> {
 
 /// The engine in this process, fed as fast as it takes keyframes or, with
 /// a pace `(start, period)`, keyframe `k` at `start + k · period`; the
-/// third field counts each edge's weighted snapshots (see
+/// third field, when given, counts each edge's weighted snapshots (see
 /// [`Sink::weighted_snapshots`]).
-pub struct EmbeddedSink<P: EnginePose = Pose2>(pub Engine<P>, pub Option<(Instant, Duration)>, pub Vec<u32>);
+pub struct EmbeddedSink<P: EnginePose = Pose2>(
+    pub Engine<P>,
+    pub Option<(Instant, Duration)>,
+    pub Option<Vec<u32>>,
+);
 
 /// What a replay does per dimension: a snapshot's poses read as the
 /// dimension's poses.
@@ -80,7 +84,9 @@ impl ReplayPose for Pose3 {
 impl<P: EnginePose> EmbeddedSink<P> {
     /// Counts the snapshot just published for each edge that weighs in it.
     fn count_weighted(&mut self) {
-        let weighted = &mut self.2;
+        let Some(weighted) = &mut self.2 else {
+            return;
+        };
         weighted.resize(self.0.graph().edges().len(), 0);
         for (e, n) in weighted.iter_mut().enumerate() {
             *n += u32::from(self.0.switch(e).is_some_and(|s| s >= REJECTED_BELOW));
@@ -105,11 +111,12 @@ impl<P: ReplayPose> Sink<P> for EmbeddedSink<P> {
             self.0.add_gps(*f)?;
         }
         self.0.update();
+        let latency = arrival.elapsed().as_secs_f64() * 1e6;
         self.count_weighted();
         Ok(if step.edges.is_empty() {
             vec![]
         } else {
-            vec![(k, arrival.elapsed().as_secs_f64() * 1e6)]
+            vec![(k, latency)]
         })
     }
 
@@ -149,7 +156,7 @@ impl<P: ReplayPose> Sink<P> for EmbeddedSink<P> {
     }
 
     fn weighted_snapshots(&self) -> Option<Vec<u32>> {
-        Some(self.2.clone())
+        self.2.clone()
     }
 }
 
