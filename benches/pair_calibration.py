@@ -20,32 +20,12 @@ import os, sys
 import numpy as np
 
 from common import DATA
-from pcm import adjoint, chain_of, compose, inverse, read_g2o, sandwich
+from pcm import Chain, adjoint, chain_of, inverse, read_g2o, sandwich
 
 CHI2_3_99, CHI2_3_MEDIAN = 11.3449, 2.3660
 FILES = ["manhattanolson3500_g2oversion.g2o", "intel_sesync.g2o", "ringcity.g2o", "input_m3500b_g2o.g2o",
          "input_intel_g2o.g2o", "mit_killian.g2o"]
 TRANSLATION, ROTATION = np.diag([1.0, 1.0, 0.0]), np.diag([0.0, 0.0, 1.0])
-
-
-class Chain:
-    """Dead reckoning and prefix sums of one part of the odometry's covariance (see pcm.Chain)."""
-
-    def __init__(self, n, odometry, part):
-        self.D, self.P = np.zeros((n, 3)), np.zeros((n, 3, 3))
-        for k in range(n - 1):
-            z, cov = odometry[k]
-            self.D[k + 1] = compose(self.D[k], z)
-            self.P[k + 1] = self.P[k] + sandwich(adjoint(self.D[k + 1]), part(cov))
-
-    def between(self, a, c):
-        T = compose(inverse(self.D[a]), self.D[c])
-        lo, hi = np.minimum(a, c), np.maximum(a, c)
-        C = sandwich(adjoint(inverse(self.D[hi])), self.P[hi] - self.P[lo])
-        back = a > c
-        if np.any(back):
-            C[back] = sandwich(adjoint(inverse(T[back])), C[back])
-        return T, C
 
 
 def cycles(path, pairs=20000, seed=0):
@@ -54,7 +34,7 @@ def cycles(path, pairs=20000, seed=0):
     odometry, loops = {}, []
     for i, j, z, omega in edges:
         if j == i + 1 and i not in odometry:
-            odometry[i] = (z, np.linalg.inv(omega))
+            odometry[i] = (z, omega)
         else:
             loops.append((i, j, z, np.linalg.inv(omega)))
     I, J = np.array([l[0] for l in loops]), np.array([l[1] for l in loops])
@@ -68,7 +48,7 @@ def cycles(path, pairs=20000, seed=0):
                   (none, part(ROTATION))]
     S = []
     for of_loop, of_odometry in components:
-        chain = Chain(max(vertices) + 1, odometry, of_odometry)
+        chain = Chain(max(vertices) + 1, odometry, 1.0, of_odometry)
         Cp = np.array([of_loop(c) for c in C])
         back = (inverse(Z[B]), sandwich(adjoint(Z[B]), Cp[B]))
         e, s = chain_of([(Z[A], Cp[A]), chain.between(J[A], J[B]), back, chain.between(I[B], I[A])])

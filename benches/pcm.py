@@ -86,15 +86,17 @@ def sandwich(A, S):
 
 
 class Chain:
-    """Dead reckoning D_k and prefix sums P_m = Σ_{k<m} Ad(D_{k+1}) Σ_k Ad(D_{k+1})ᵀ of the odometry."""
+    """Dead reckoning D_k and prefix sums P_m = Σ_{k<m} Ad(D_{k+1}) Σ_k Ad(D_{k+1})ᵀ of the odometry,
+    Σ_k its covariance × `scale`, or the part of it `part` keeps."""
 
-    def __init__(self, n, odometry, scale):
+    def __init__(self, n, odometry, scale, part=None):
         self.D = np.zeros((n, 3))
         self.P = np.zeros((n, 3, 3))
         for k in range(n - 1):
             z, omega = odometry[k]
+            cov = np.linalg.inv(omega) * scale
             self.D[k + 1] = compose(self.D[k], z)
-            self.P[k + 1] = self.P[k] + sandwich(adjoint(self.D[k + 1]), np.linalg.inv(omega) * scale)
+            self.P[k + 1] = self.P[k] + sandwich(adjoint(self.D[k + 1]), part(cov) if part else cov)
 
     def between(self, a, c):
         """The odometry from keyframes a to c (index arrays): pose and covariance in c's frame."""
