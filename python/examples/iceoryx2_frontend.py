@@ -18,7 +18,7 @@ docs/protocol.md, not imported from slamd. The stream is what
 
 Snapshots come as whole maps on ``{ns}/poses`` and, for every version, what
 it changed on ``{ns}/changes``; ``Map`` puts the two together as
-docs/protocol.md ("Reading snapshots") says. After the last keyframe it
+docs/clients.md ("Reading snapshots") says. After the last keyframe it
 takes snapshots until one says the map is settled (the daemon's closing
 re-solves are done), then prints the final map's
 chi2 as a JSON object on the last line of stdout. ``chi2`` is computed

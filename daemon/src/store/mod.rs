@@ -20,7 +20,7 @@
 //! whole records after it is corruption: the directory is refused,
 //! unchanged, until [`recovery::recover`] has kept what can be verified.
 //! A file of another format version is refused, never misread. The
-//! formats are in docs/daemon.md, "State directory".
+//! formats are in docs/state.md.
 
 mod bytes;
 pub mod journal;

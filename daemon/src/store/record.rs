@@ -1,6 +1,6 @@
 //! [`Record`]: one message the daemon took in, as the journal stores it.
 //!
-//! Payload layout (little-endian; see docs/daemon.md, "State directory"):
+//! Payload layout (little-endian; see docs/state.md):
 //! `tag: u8 | frontend: u32 | sequence: u64 | body`, with the body
 //!
 //! | tag | record      | body |
