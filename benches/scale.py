@@ -11,7 +11,9 @@ streams it (with --daemon: into `slamd run --state DIR` on a namespace of
 its own instead). Each replay runs under `/usr/bin/time -v` for its peak
 RSS (with --daemon, the daemon's). Prints one table: total time and its
 ratio to linear growth from the first size, p50 / p99 / max wait per
-keyframe, final χ² against the optimum, peak RSS and RSS per keyframe;
+keyframe, final χ² against the optimum (`slamd solve --polish`) and against
+the batch robust optimum (`slamd solve --robust`: the filter's kernel
+polished over the whole file at once), peak RSS and RSS per keyframe;
 with --daemon also the pose bytes an average snapshot carried and how many
 of the snapshots went out whole (the daemon's closing log line).
 The binary is target/release/slamd or $SLAMD_BIN.
@@ -82,22 +84,25 @@ def main():
                         "--truth", os.path.join(tmp, f"truth-{n}.txt")], check=True, capture_output=True)
         best = last_json(subprocess.run([BIN, "solve", world, "--polish", "--json"], check=True,
                                         capture_output=True, text=True).stdout)["chi2"]
+        robust = last_json(subprocess.run([BIN, "solve", world, "--robust", "--json"], check=True,
+                                          capture_output=True, text=True).stdout)["chi2"]
         print(f"{n} keyframes: replay …", file=sys.stderr, flush=True)
         if args.daemon:
             r, rss = through_daemon(world, tmp, n)
         else:
             out, rss = timed([BIN, "replay", world, "--embedded", "--json"])
             r = last_json(out)
-        rows.append((n, r, best, rss))
+        rows.append((n, r, best, robust, rss))
     n0, r0 = rows[0][0], rows[0][1]
     extra = " bytes per snapshot | whole snapshots |" if args.daemon else ""
     print(f"| keyframes | total s | × linear from {n0:,} | p50 µs | p99 ms | max ms | χ² / optimum | "
-          f"peak RSS MiB | KiB per keyframe |{extra}")
-    print("|---|---|---|---|---|---|---|---|---|" + ("---|---|" if args.daemon else ""))
-    for n, r, best, rss in rows:
+          f"χ² / robust optimum | peak RSS MiB | KiB per keyframe |{extra}")
+    print("|---|---|---|---|---|---|---|---|---|---|" + ("---|---|" if args.daemon else ""))
+    for n, r, best, robust, rss in rows:
         linear = r["total_s"] / (r0["total_s"] * n / n0)
         row = (f"| {n:,} | {r['total_s']:.1f} | {linear:.2f} | {r['p50_us']:.0f} | {r['p99_us'] / 1e3:.1f} | "
-               f"{r['max_us'] / 1e3:.0f} | {r['chi2'] / best:.4f} | {rss:.0f} | {rss * 1024 / n:.1f} |")
+               f"{r['max_us'] / 1e3:.0f} | {r['chi2'] / best:.4f} | {r['chi2'] / robust:.4f} | {rss:.0f} | "
+               f"{rss * 1024 / n:.1f} |")
         if args.daemon:
             row += (f" {r.get('bytes_per_snapshot', float('nan')):,} | "
                     f"{r.get('whole', 0):,} of {r.get('snapshots', 0):,} |")
