@@ -18,7 +18,7 @@ import os, subprocess, sys, tempfile
 import numpy as np
 
 from common import DATA, slamd
-from pcm import Chain, adjoint, chain_of, inverse, read_g2o, sandwich
+from pcm import Chain, adjoint, chain_of, inverse, loop_closures, read_g2o, sandwich
 
 FILES = {"manhattan": "manhattanolson3500_g2oversion.g2o", "intel": "intel_sesync.g2o",
          "ringcity": "ringcity.g2o", "city": "city10000.g2o"}
@@ -29,20 +29,13 @@ CHI2_3_MEDIAN, CHI2_3_Q25 = 2.3660, 1.2125
 def estimate(path, reach=4):
     """(loop closures, paired ones, median scale, first-quartile scale)."""
     vertices, edges = read_g2o(path)
-    odometry, loops = {}, []
-    for i, j, z, omega in edges:
-        if j == i + 1 and i not in odometry:
-            odometry[i] = (z, omega)
-            continue
-        cov = np.linalg.inv(omega)
-        if i > j:  # (T Exp ξ)⁻¹ = T⁻¹ Exp(−Ad_T ξ)
-            i, j, z, cov = j, i, inverse(z), sandwich(adjoint(z), cov)
-        loops.append((i, j, z, cov))
+    odometry, _, I, J, Z, C = loop_closures(edges)
+    back = I > J  # older first: (T Exp ξ)⁻¹ = T⁻¹ Exp(−Ad_T ξ)
+    I[back], J[back] = J[back], I[back]
+    C[back], Z[back] = sandwich(adjoint(Z[back]), C[back]), inverse(Z[back])
     chain = Chain(max(vertices) + 1, odometry, 1.0)
-    I, J = np.array([l[0] for l in loops]), np.array([l[1] for l in loops])
-    Z, C = np.array([l[2] for l in loops]), np.array([l[3] for l in loops])
     d2 = []
-    for a in range(len(loops)):
+    for a in range(len(I)):
         near = np.flatnonzero((np.abs(I - I[a]) <= reach) & (np.abs(J - J[a]) <= reach))
         near = near[near != a]
         if len(near) == 0:
@@ -52,7 +45,7 @@ def estimate(path, reach=4):
         back = (inverse(Z[b:b + 1]), sandwich(adjoint(Z[b:b + 1]), C[b:b + 1]))
         T, S = chain_of([(Z[s], C[s]), chain.between(J[s], J[b:b + 1]), back, chain.between(I[b:b + 1], I[s])])
         d2.append(float(np.einsum("ni,nij,nj->n", T, np.linalg.inv(S), T)[0]))
-    return len(loops), len(d2), np.median(d2) / CHI2_3_MEDIAN, np.percentile(d2, 25) / CHI2_3_Q25
+    return len(I), len(d2), np.median(d2) / CHI2_3_MEDIAN, np.percentile(d2, 25) / CHI2_3_Q25
 
 
 def main():

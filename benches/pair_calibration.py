@@ -20,7 +20,7 @@ import os, sys
 import numpy as np
 
 from common import DATA
-from pcm import Chain, adjoint, chain_of, inverse, read_g2o, sandwich
+from pcm import Chain, adjoint, chain_of, inverse, loop_closures, read_g2o, sandwich
 
 CHI2_3_99, CHI2_3_MEDIAN = 11.3449, 2.3660
 FILES = ["manhattanolson3500_g2oversion.g2o", "intel_sesync.g2o", "ringcity.g2o", "input_m3500b_g2o.g2o",
@@ -31,16 +31,9 @@ TRANSLATION, ROTATION = np.diag([1.0, 1.0, 0.0]), np.diag([0.0, 0.0, 1.0])
 def cycles(path, pairs=20000, seed=0):
     """The cycle errors e, their covariance components S_c, and the odometry between their ends."""
     vertices, edges = read_g2o(path)
-    odometry, loops = {}, []
-    for i, j, z, omega in edges:
-        if j == i + 1 and i not in odometry:
-            odometry[i] = (z, omega)
-        else:
-            loops.append((i, j, z, np.linalg.inv(omega)))
-    I, J = np.array([l[0] for l in loops]), np.array([l[1] for l in loops])
-    Z, C = np.array([l[2] for l in loops]), np.array([l[3] for l in loops])
+    odometry, _, I, J, Z, C = loop_closures(edges)
     rng = np.random.default_rng(seed)
-    A, B = rng.integers(0, len(loops), pairs), rng.integers(0, len(loops), pairs)
+    A, B = rng.integers(0, len(I), pairs), rng.integers(0, len(I), pairs)
     A, B = A[A != B], B[A != B]
     none = lambda c: np.zeros_like(c)
     part = lambda m: (lambda c: m @ c @ m)

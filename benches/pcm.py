@@ -57,6 +57,20 @@ def read_g2o(path):
     return vertices, edges
 
 
+def loop_closures(edges):
+    """Split a graph's edges (`read_g2o`): the odometry by its older keyframe, `(z, Ω)`, and the
+    loop closures as arrays: file edge index E, ends I and J, measurement Z and covariance C = Ω⁻¹."""
+    odometry, loops = {}, []
+    for e, (i, j, z, omega) in enumerate(edges):
+        if j == i + 1 and i not in odometry:
+            odometry[i] = (z, omega)
+        else:
+            loops.append((e, i, j, z, np.linalg.inv(omega)))
+    E, I, J = (np.array([l[k] for l in loops], dtype=int) for k in range(3))
+    Z, C = np.array([l[3] for l in loops]), np.array([l[4] for l in loops])
+    return odometry, E, I, J, Z, C
+
+
 def wrap(a):
     return (a + np.pi) % (2 * np.pi) - np.pi
 
@@ -157,19 +171,11 @@ def max_clique(adj, starts):
 def pcm(path, scale, starts):
     """Edge indices (among the file's edges) PCM leaves out, and seconds."""
     vertices, edges = read_g2o(path)
-    n = max(vertices) + 1
-    odometry, loops = {}, []
-    for e, (i, j, z, omega) in enumerate(edges):
-        if j == i + 1 and i not in odometry:
-            odometry[i] = (z, omega)
-        else:
-            loops.append((e, i, j, z, np.linalg.inv(omega) * scale))
+    odometry, E, I, J, Z, C = loop_closures(edges)
     t = time.perf_counter()
-    chain = Chain(n, odometry, scale)
-    I, J = np.array([l[1] for l in loops]), np.array([l[2] for l in loops])
-    Z, C = np.array([l[3] for l in loops]), np.array([l[4] for l in loops])
-    kept = {loops[q][0] for q in max_clique(consistency(chain, I, J, Z, C), starts)}
-    return {l[0] for l in loops} - kept, len(loops), time.perf_counter() - t
+    chain = Chain(max(vertices) + 1, odometry, scale)
+    kept = {int(E[q]) for q in max_clique(consistency(chain, I, J, Z, C * scale), starts)}
+    return {int(e) for e in E} - kept, len(E), time.perf_counter() - t
 
 
 def variance_factor(binary, clean):
