@@ -173,7 +173,7 @@ fn a_restored_judge_decides_what_was_pending() {
     assert!(map.edges[wrong].pending);
     drop(engine);
     let decide = |config: EngineConfig| {
-        let mut engine = Engine::restore(config, &map, false).expect("restores");
+        let mut engine = Engine::restore(config, map.clone(), false).expect("restores");
         assert!(engine.is_pending(wrong), "pending again after the restore");
         go_on_until_decided(&mut engine, wrong);
         engine.switches()[wrong]

@@ -316,7 +316,7 @@ proptest! {
             (t.compose(&Pose2::new(0.05 * n[0], 0.05 * n[1], 0.02 * n[2])), information2(weights[e]))
         });
         let (map, weight) = switched(&g, &truth, &switches);
-        let mut engine = Engine::restore(config(), &map, false)
+        let mut engine = Engine::restore(config(), map, false)
             .map_err(|e| TestCaseError::fail(e.to_string()))?;
         let n = truth.len();
         let pairs: Vec<_> = pairs.iter().map(|&(a, b)| (a % n, b % n)).collect();
@@ -339,7 +339,7 @@ proptest! {
             (t.compose(&Pose3::from_xyz_rpy(n)), information3(weights[e]))
         });
         let (map, weight) = switched(&g, &truth, &switches);
-        let mut engine = Engine::restore(config(), &map, false)
+        let mut engine = Engine::restore(config(), map, false)
             .map_err(|e| TestCaseError::fail(e.to_string()))?;
         let n = truth.len();
         let pairs: Vec<_> = pairs.iter().map(|&(a, b)| (a % n, b % n)).collect();

@@ -31,7 +31,7 @@ fn manhattan_saved_at_1750_continues_to_the_optimum() {
     let bytes = saved.encode();
     let map = MapFile::decode(Path::new("manhattan.map"), &bytes).unwrap();
     assert_eq!(map.keyframes.len(), 1750);
-    let mut restored = Engine::restore(deterministic(), &map, false).unwrap();
+    let mut restored = Engine::restore(deterministic(), map, false).unwrap();
     restored.update();
     let (a, b) = (first.snapshot(), restored.snapshot());
     let pa: Vec<_> = a.poses().map(|(_, p)| p).collect();
@@ -61,7 +61,7 @@ fn a_map_that_breaks_the_graph_is_refused() {
     feed(&mut engine, &g, 0..50);
     let mut map = engine.map();
     map.keyframes.truncate(40);
-    let err = Engine::restore(deterministic(), &map, false).err().unwrap();
+    let err = Engine::restore(deterministic(), map, false).err().unwrap();
     assert!(err.to_string().contains("unknown keyframe"), "{err}");
 }
 
@@ -79,7 +79,7 @@ fn a_map_saved_with_an_unjoined_newest_keyframe_restores() {
     assert_eq!(saved.keyframes.len(), 201);
     assert!(!saved.keyframes[200].joined);
     let map = MapFile::decode(Path::new("unjoined.map"), &saved.encode()).unwrap();
-    let mut restored = Engine::restore(deterministic(), &map, false).unwrap();
+    let mut restored = Engine::restore(deterministic(), map, false).unwrap();
     restored.update();
     assert_eq!(restored.snapshot().len(), 200);
     let odometry = g.by_newer()[200].clone();
@@ -114,7 +114,7 @@ fn keyframe_timestamps_survive_a_saved_map() {
     let map: MapFile = MapFile::decode(Path::new("intel.map"), &bytes).unwrap();
     let saved: Vec<u64> = map.keyframes.iter().map(|k| k.timestamp_ns).collect();
     assert_eq!(saved, (0..60).map(stamp).collect::<Vec<_>>());
-    let restored = Engine::restore(deterministic(), &map, false).unwrap();
+    let restored = Engine::restore(deterministic(), map, false).unwrap();
     let snap = restored.snapshot();
     let back: Vec<(u64, u64)> = snap.poses().map(|(id, _)| id).zip(snap.timestamps()).collect();
     let want: Vec<(u64, u64)> = (0..60).map(|k| (g.id_of(k), stamp(k))).collect();

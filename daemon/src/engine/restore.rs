@@ -199,29 +199,33 @@ impl<P: EnginePose> Engine<P> {
     /// the map's estimate does not cover yet), a re-solve's robust polish
     /// runs first, over everything. The map's GPS origin wins over the
     /// configured one (its fixes are relative to it).
+    ///
+    /// The map is taken by value: with the filter on and a background
+    /// thread, the judge's own factorisation is built from it on that
+    /// thread, and a copy would cost a map's worth of memory at the
+    /// restart's peak.
     pub fn restore(
         config: EngineConfig,
-        map: &crate::store::MapFile<P>,
+        map: crate::store::MapFile<P>,
         polish: bool,
     ) -> Result<Self, EngineError> {
         if !config.outliers.enabled {
-            return Self::restore_whole(config, map, polish, false);
+            return Self::restore_whole(config, &map, polish, false);
         }
         // the judge re-solves before it decides what was pending
         let pending: Vec<usize> = (0..map.edges.len()).filter(|&e| map.edges[e].pending).collect();
         let judge_polish = polish || !pending.is_empty();
-        let mut engine = Self::restore_whole(judge::published_config(&config), map, polish, true)?;
+        let mut engine = Self::restore_whole(judge::published_config(&config), &map, polish, true)?;
         let keyframes = engine.keyframe_count();
         engine.undecided = pending.into_iter().map(|e| (e, Some(keyframes))).collect();
         let judge_config = judge::judge_config(&config);
         if !config.background {
-            let judge = Self::restore_whole(judge_config, map, judge_polish, false)?;
+            let judge = Self::restore_whole(judge_config, &map, judge_polish, false)?;
             return Ok(Self::beside(engine, judge));
         }
         // the judge's own factorisation runs on its thread, off the path
         // to the first snapshot: a restart waits for one, not two
-        let saved = map.clone();
-        let build = move || Self::restore_whole(judge_config, &saved, judge_polish, false);
+        let build = move || Self::restore_whole(judge_config, &map, judge_polish, false);
         Ok(Self::beside_restoring(engine, build))
     }
 

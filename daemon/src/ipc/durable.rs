@@ -58,10 +58,10 @@ impl<P: EnginePose> EngineLoop<P> {
             d.acknowledged = d.acks.header();
             return Ok(());
         }
-        self.engine = Engine::restore(self.config.engine(), &map, tail > 0)?;
         self.counters.keyframes = map.keyframes.len() as u64;
         self.counters.edges = map.edges.len() as u64;
         self.counters.fixes = map.fixes.len() as u64;
+        self.engine = Engine::restore(self.config.engine(), map, tail > 0)?;
         self.counters.rejected += fold.refused;
         self.recovering = true;
         for r in fold.held {

@@ -32,7 +32,7 @@ pub fn write<P: EnginePose>(
         ..EngineConfig::default()
     };
     config.outliers.enabled = false;
-    let mut engine = Engine::<P>::restore(config, &map, false).context("factorising the solution")?;
+    let mut engine = Engine::<P>::restore(config, map, false).context("factorising the solution")?;
     let file = std::fs::File::create(path).with_context(|| format!("creating {}", path.display()))?;
     let mut w = std::io::BufWriter::new(file);
     let axes = if P::DOF == 3 {
