@@ -362,20 +362,15 @@ impl<P: EnginePose> State<P> {
 
     /// The a-posteriori variance factor `χ² / r` of the estimate (`r`: the
     /// redundancy, `DOF` per applied edge less `DOF` per keyframe past the
-    /// gauge), within [10⁻³, 1]; 1 while `r < 30`.
+    /// gauge), within [10⁻³, 1] ([`crate::gps::variance_factor`]: 1 while
+    /// `r` is below its `MIN_REDUNDANCY`).
     fn variance_factor(&self) -> f64 {
         let m = &self.model;
         let edges = (0..m.edges.len())
             .filter(|&e| m.edges[e].applied && m.weight(e) > 0.0)
             .count();
         let keyframes = m.keyframes.iter().filter(|k| k.joined).count();
-        let dof = P::DOF as i64;
-        let r = dof * edges as i64 - dof * (keyframes as i64 - 1);
-        if r < 30 {
-            1.0
-        } else {
-            (self.chi2.total() / r as f64).clamp(1e-3, 1.0)
-        }
+        crate::gps::variance_factor(self.chi2.total(), edges, keyframes, P::DOF).clamp(1e-3, 1.0)
     }
 
     /// Keyframe `k` joins the map at `guess`.
