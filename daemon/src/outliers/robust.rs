@@ -44,9 +44,8 @@ pub struct RobustEdges<'a, P: LiePose = Pose2> {
 /// [`ABANDON_RATIO`](super::ABANDON_RATIO)), then to convergence unless its
 /// cost is past [`PRUNE_RATIO`](super::PRUNE_RATIO) times the lowest (lowest
 /// first, giving up past [`LATE_RATIO`](super::LATE_RATIO) times a finished
-/// one); of the finished ones, the lowest cost at the noise level the
-/// best-fitting one shows gives the switches (`starts::lowest_at_scale`).
-/// The starts are probed `threads` at a time, with the same
+/// one); the lowest final cost gives
+/// the switches. The starts are probed `threads` at a time, with the same
 /// outcome. Once `stop` is set, every polish ends where it is. Fails when
 /// no start could be polished (or none was given).
 pub fn robust_polish<P: LiePose>(
