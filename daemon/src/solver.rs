@@ -6,7 +6,7 @@ use crate::graph::{chi2, Edge, EdgeKind, GraphError, Pose3, PoseGraph};
 use crate::linear::{chordal, two_stage, virtual_frame, Pivot};
 use crate::nonlinear::{polish, LevenbergMarquardtParams, LiePose, LmReport, Problem};
 use crate::outliers::consistency::ConsistencyGraph;
-use crate::outliers::{cycles, robust_polish, OutlierConfig, RobustEdges};
+use crate::outliers::{cycles, robust_polish, Comparison, OutlierConfig, RobustEdges};
 use crate::robust::Kernel;
 use crate::sparse::FactorError;
 use std::fmt;
@@ -251,7 +251,7 @@ fn solve_planar(graph: &PoseGraph, options: &BatchOptions) -> Result<BatchSoluti
             switchable: &switchable,
             held_out: &held_out,
         };
-        let sol = robust_polish(input, starts, filter, options.lm, 2, None)?;
+        let sol = robust_polish(input, starts, filter, options.lm, 2, None, Comparison::Stated)?;
         let mut poses = sol.poses;
         if let Some(gps) = gps.filter(|g| g.absolute) {
             let edges: Vec<Edge> = (graph.edges().iter().zip(&sol.switches))
@@ -340,7 +340,7 @@ fn solve_spatial(
             switchable: &switchable,
             held_out: &[],
         };
-        let sol = robust_polish(input, starts, &filter, options.lm, 2, None)?;
+        let sol = robust_polish(input, starts, &filter, options.lm, 2, None, Comparison::Stated)?;
         switches = Some(sol.switches);
         sol.poses
     } else if options.polish {

@@ -12,7 +12,7 @@ use crate::graph::{chi2_of_edges, Edge, InformationMatrix, PoseGraph};
 use crate::nonlinear::{LevenbergMarquardtParams, PositionPrior};
 use crate::outliers::consistency::ConsistencyGraph;
 use crate::outliers::cycles;
-use crate::outliers::{robust_polish, OutlierConfig, RobustEdges, OFF_BELOW, REJECTED_BELOW};
+use crate::outliers::{robust_polish, Comparison, OutlierConfig, RobustEdges, OFF_BELOW, REJECTED_BELOW};
 use slamd_protocol::codec::Origin;
 use std::any::Any;
 use std::collections::HashMap;
@@ -248,7 +248,15 @@ impl<P: EnginePose> Model<P> {
         if polish == Polish::Inline {
             lm.relative_error_tol = lm.relative_error_tol.max(INLINE_RELATIVE_TOL);
         }
-        let Ok(solution) = robust_polish(input, starts, filter, lm, threads, Some(stop)) else {
+        let Ok(solution) = robust_polish(
+            input,
+            starts,
+            filter,
+            lm,
+            threads,
+            Some(stop),
+            Comparison::AtFirstStart,
+        ) else {
             return initial;
         };
         if filter.enabled {

@@ -25,7 +25,7 @@ mod starts;
 pub use awake::DORMANT_BELOW;
 pub use cycles::{CycleCheck, CycleParams, Verdict};
 pub use drift::DriftRun;
-pub use robust::{robust_polish, RobustEdges, RobustSolution};
+pub use robust::{robust_polish, Comparison, RobustEdges, RobustSolution};
 pub use starts::{ABANDON_RATIO, LATE_RATIO, LOOK_ITERATIONS, PROBE_ITERATIONS, PRUNE_RATIO};
 
 use crate::graph::Edge;

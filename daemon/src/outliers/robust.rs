@@ -1,7 +1,7 @@
 //! [`robust_polish`]: the polish that switches wrong loop closures off,
 //! shared by the engine's re-solve and `slamd solve --robust`.
 
-use super::starts::best_start;
+use super::starts::{accepted_variance_factor, best_start};
 use super::OutlierConfig;
 use crate::geometry::Pose2;
 use crate::graph::Edge;
@@ -34,6 +34,21 @@ pub struct RobustEdges<'a, P: LiePose = Pose2> {
     pub held_out: &'a [bool],
 }
 
+/// The noise level at which [`robust_polish`] compares its finished starts.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Comparison {
+    /// At the stated information: the lowest robust cost wins (a batch
+    /// solve, whose first start is only a guess).
+    Stated,
+    /// At the a-posteriori variance factor `σ̂²` of the edges the first
+    /// start accepts (odometry and every switch at
+    /// [`REJECTED_BELOW`](super::REJECTED_BELOW) or above, within
+    /// `[10⁻³, 1]`): the engine's re-solves, whose first start is the
+    /// current estimate, so that the noise level the accepted set shows
+    /// prices every start alike.
+    AtFirstStart,
+}
+
 /// The edges `input` holds out (the verdict of PCM,
 /// [`super::consistency`], or of paper A's cycle test) are switched off;
 /// Levenberg–Marquardt then minimises the kernel's robust cost, each
@@ -44,10 +59,10 @@ pub struct RobustEdges<'a, P: LiePose = Pose2> {
 /// [`ABANDON_RATIO`](super::ABANDON_RATIO)), then to convergence unless its
 /// cost is past [`PRUNE_RATIO`](super::PRUNE_RATIO) times the lowest (lowest
 /// first, giving up past [`LATE_RATIO`](super::LATE_RATIO) times a finished
-/// one); the lowest final cost gives
-/// the switches. The starts are probed `threads` at a time, with the same
-/// outcome. Once `stop` is set, every polish ends where it is. Fails when
-/// no start could be polished (or none was given).
+/// one); of the finished ones, the least robust cost at the noise level
+/// `compare` names gives the switches. The starts are probed `threads` at
+/// a time, with the same outcome. Once `stop` is set, every polish ends
+/// where it is. Fails when no start could be polished (or none was given).
 pub fn robust_polish<P: LiePose>(
     input: RobustEdges<'_, P>,
     starts: Vec<Vec<P>>,
@@ -55,6 +70,7 @@ pub fn robust_polish<P: LiePose>(
     params: LevenbergMarquardtParams,
     threads: usize,
     stop: Option<&AtomicBool>,
+    compare: Comparison,
 ) -> Result<RobustSolution<P>, FactorError> {
     let RobustEdges {
         edges,
@@ -77,7 +93,13 @@ pub fn robust_polish<P: LiePose>(
         }),
         stop,
     };
-    let best = best_start(problem, starts, params, threads)?;
+    let sigma2 = match (compare, problem.robust, starts.first()) {
+        (Comparison::AtFirstStart, Some(robust), Some(first)) => {
+            accepted_variance_factor(problem.edges, &robust, first)
+        }
+        _ => 1.0,
+    };
+    let best = best_start(problem, starts, params, threads, sigma2)?;
     let poses = best.poses;
     let switches = (0..edges.len())
         .map(|a| {
@@ -176,6 +198,7 @@ pub(super) mod tests {
             params,
             1,
             None,
+            Comparison::Stated,
         )
         .unwrap();
         // the reference: every edge in every linear system
@@ -220,6 +243,7 @@ pub(super) mod tests {
                 params,
                 1,
                 Some(&stop),
+                Comparison::Stated,
             )
             .unwrap()
         };
