@@ -93,8 +93,9 @@ pub fn robust_polish<P: LiePose>(
         }),
         stop,
     };
-    let sigma2 = match (compare, problem.robust, starts.first()) {
-        (Comparison::AtFirstStart, Some(robust), Some(first)) => {
+    // one start has nothing to be compared with
+    let sigma2 = match (compare, problem.robust, starts.as_slice()) {
+        (Comparison::AtFirstStart, Some(robust), [first, _, ..]) => {
             accepted_variance_factor(problem.edges, &robust, first)
         }
         _ => 1.0,

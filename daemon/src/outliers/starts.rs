@@ -5,6 +5,7 @@
 
 use super::awake::polish_awake;
 use super::REJECTED_BELOW;
+use crate::graph::{edge_chi2, Edge};
 use crate::nonlinear::{LevenbergMarquardtParams, LiePose, LmReport, Problem, Robust};
 use crate::sparse::FactorError;
 use std::sync::{Mutex, OnceLock};
@@ -115,15 +116,19 @@ fn lowest_at_scale<P: LiePose>(
 /// redundancy), within `[10⁻³, 1]` as the covariance gate's
 /// ([`crate::gps::variance_factor`]).
 pub(super) fn accepted_variance_factor<P: LiePose>(
-    edges: &[crate::graph::Edge<P>],
+    edges: &[Edge<P>],
     robust: &Robust<'_>,
     poses: &[P],
 ) -> f64 {
     let (mut chi2, mut accepted) = (0.0, 0);
     for (e, &switchable) in edges.iter().zip(robust.switchable) {
-        let (xi, xj) = (&poses[e.from], &poses[e.to]);
-        let c = P::mahalanobis(&e.information, &P::edge_error(e, xi, xj));
-        if !switchable || robust.kernel.switch(c, || P::asc_scale(e, xi, xj)) >= REJECTED_BELOW {
+        let c = edge_chi2(e, poses);
+        if !switchable
+            || robust
+                .kernel
+                .switch(c, || P::asc_scale(e, &poses[e.from], &poses[e.to]))
+                >= REJECTED_BELOW
+        {
             chi2 += c;
             accepted += 1;
         }
@@ -133,18 +138,14 @@ pub(super) fn accepted_variance_factor<P: LiePose>(
 
 /// The robust cost at `poses` with every `χ²` divided by `sigma2`: the
 /// kernel's `ρ(χ²/σ²)` on switchable edges, `χ²/σ²` on the others.
-fn scaled_cost<P: LiePose>(
-    edges: &[crate::graph::Edge<P>],
-    robust: &Robust<'_>,
-    poses: &[P],
-    sigma2: f64,
-) -> f64 {
+fn scaled_cost<P: LiePose>(edges: &[Edge<P>], robust: &Robust<'_>, poses: &[P], sigma2: f64) -> f64 {
     let mut cost = 0.0;
     for (e, &switchable) in edges.iter().zip(robust.switchable) {
-        let (xi, xj) = (&poses[e.from], &poses[e.to]);
-        let c = P::mahalanobis(&e.information, &P::edge_error(e, xi, xj)) / sigma2;
+        let c = edge_chi2(e, poses) / sigma2;
         cost += if switchable {
-            robust.kernel.cost(c, || P::asc_scale(e, xi, xj))
+            robust
+                .kernel
+                .cost(c, || P::asc_scale(e, &poses[e.from], &poses[e.to]))
         } else {
             c
         };
