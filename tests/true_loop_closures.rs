@@ -6,7 +6,7 @@
 //! 16.27, so a loop closure whose Δχ² exceeds about that is cheaper off than
 //! on. On 20,000 synthetic worlds (`slamd-held-off`, docs/robustness.md,
 //! "True loop closures held off") a true loop closure held off alone had
-//! Δχ² ≥ 12.36, one held off together with others ≥ 7.53.
+//! Δχ² ≥ 11.29, one held off together with others ≥ 7.53.
 //!
 //! The property: after a stream closed by its final re-solve, no true loop
 //! closure whose Δχ² is within the 90% quantile of χ²₃ is switched off, in
