@@ -194,7 +194,8 @@ impl<P: EnginePose> Model<P> {
     /// solutions with and without the switches: after a large loop closure
     /// the estimate can sit in the wrong basin, and the two-stage
     /// solution does not depend on it ([`Self::starts`]; the closing one
-    /// also without the loop closures let in on arrival). [`Polish::Inline`]
+    /// also without the loop closures let in on arrival, and without any:
+    /// the dead-reckoned map). [`Polish::Inline`]
     /// starts from the estimate alone and stops at [`INLINE_RELATIVE_TOL`].
     /// Sets every switch from the result; returns the poses (compact
     /// indices). Once `stop` is set the polish ends where it is.
@@ -333,6 +334,20 @@ impl<P: EnginePose> Model<P> {
                 let unadmitted = |m: &Self, e: usize| if m.edges[e].admitted { 0.0 } else { m.weight(e) };
                 starts.extend(self.linear_start(compact, joined, initial[0], unadmitted));
             }
+            // and, closing, the dead-reckoned map: the two-stage solution
+            // under no switchable loop closure. Wrong loop closures let in
+            // mid-stream can have bent every other start, not this one. It
+            // equals the start before (with none let in on arrival, the one
+            // under the switches) unless a loop closure a re-solve let in
+            // weighs in, so only then
+            let outliers = &config.outliers;
+            let switched = |m: &Self, e: usize| outliers.switchable(&m.graph.edges()[e]);
+            let weighed_in =
+                |&e: &usize| switched(self, e) && !self.edges[e].admitted && self.weight(e) > 0.0;
+            if polish == Polish::Closing && ids.iter().any(weighed_in) {
+                let dead_reckoned = |m: &Self, e: usize| if switched(m, e) { 0.0 } else { m.weight(e) };
+                starts.extend(self.linear_start(compact, joined, initial[0], dead_reckoned));
+            }
         }
         starts
     }
@@ -344,7 +359,7 @@ impl<P: EnginePose> Model<P> {
         compact: &[usize],
         joined: &[usize],
         gauge: P,
-        weight: fn(&Self, usize) -> f64,
+        weight: impl Fn(&Self, usize) -> f64,
     ) -> Option<Vec<P>> {
         let keyframes: Vec<_> = joined.iter().map(|&k| self.graph.keyframes()[k]).collect();
         let (weighted, _) = self.compact_edges(compact, weight);

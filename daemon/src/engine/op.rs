@@ -47,9 +47,10 @@ pub enum Polish {
     /// stopped (the drift check's): its starts are probed two at a time,
     /// with the outcome of one at a time.
     FullInline,
-    /// [`Polish::FullInline`] at the end of a stream, with one more start:
-    /// the two-stage solution without the loop closures let in on arrival
-    /// since the last multi-start re-solve.
+    /// [`Polish::FullInline`] at the end of a stream, with two more
+    /// starts: the two-stage solutions without the loop closures let in on
+    /// arrival since the last multi-start re-solve, and without any loop
+    /// closure (the dead-reckoned map).
     Closing,
     /// The nonlinearity check's inline re-solve: the robust polish from
     /// the current estimate alone; the next background re-solve has the

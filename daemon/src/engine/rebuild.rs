@@ -142,6 +142,42 @@ mod tests {
         }
     }
 
+    /// The dead-reckoned start: the closing re-solve's, once a loop
+    /// closure weighs in that was not let in on arrival (a re-solve let it
+    /// in, so the start without the admitted ones still holds it), with
+    /// every loop closure out; no other polish takes it.
+    #[test]
+    fn the_closing_resolve_starts_from_the_dead_reckoned_map_too() {
+        let config = EngineConfig::default();
+        let mut state = line_closed(&config, 5.3);
+        let (joined, compact) = state.model.compact_joined();
+        let initial: Vec<Pose2> = joined.iter().map(|&k| state.estimate()[k]).collect();
+        let (_, ids) = state.model.compact_edges(&compact, |m, e| m.edges[e].scale);
+        let starts = |state: &State, polish| {
+            state
+                .model
+                .starts(&config, &compact, &joined, &initial, &ids, polish)
+        };
+        // only admitted ones weigh in: it would be the start without them
+        assert_eq!(starts(&state, Polish::Closing).len(), 4);
+        // the far one let in by a re-solve at switch 0.6: the estimate,
+        // under the switches, under none, without the admitted one, and
+        // dead-reckoned, where keyframe 5 sits where odometry puts it
+        state.model.edges[6].switch = 0.6;
+        let closing = starts(&state, Polish::Closing);
+        assert_eq!(closing.len(), 5);
+        assert!(
+            (closing[4][5].x - 5.0).abs() < 1e-9 && closing[4][5].y.abs() < 1e-9,
+            "{:?}",
+            closing[4][5]
+        );
+        // the start without the admitted one still feels the far one
+        assert!((closing[3][5].x - 5.0).abs() > 0.1, "{:?}", closing[3][5]);
+        // a scheduled re-solve: no rescue start for a switch of 0.6
+        assert_eq!(starts(&state, Polish::Full).len(), 2);
+        assert_eq!(starts(&state, Polish::FullInline).len(), 3);
+    }
+
     /// The start under no switches rescues loop closures held wrong; a
     /// scheduled re-solve takes it only while one is (below 0.5), the
     /// closing one whenever a switch is below 1.
