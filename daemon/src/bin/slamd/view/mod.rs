@@ -133,11 +133,16 @@ impl Channels {
         }
     }
 
-    /// Logs the daemon's health: from its status, else from `frame`.
+    /// Logs the daemon's health: its counters from the newer of `frame`
+    /// and its status (a status is read once a tick, so it can lag the
+    /// frame it goes with), its latency and journal from the status.
     fn publish_health(&self, frame: &Frame, status: Option<&DaemonStatus>) {
         if self.health.has_sinks() {
-            let t = status.map_or(frame.header.solved_at_ns, |s| s.snapshot.solved_at_ns);
-            let header = status.map_or(&frame.header, |s| &s.snapshot);
+            let header = match status {
+                Some(s) if s.snapshot.version > frame.header.version => &s.snapshot,
+                _ => &frame.header,
+            };
+            let t = header.solved_at_ns;
             let v = scene::health(header, status);
             self.health.log_with_meta(v.to_string().as_bytes(), at(t));
         }
